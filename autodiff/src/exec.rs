@@ -1,0 +1,1146 @@
+//! The executor: plans pending nodes into steps and runs them.
+//!
+//! A *region* is a run of consecutive nodes over one domain of `len`
+//! elements: elementwise maps, gathers from arrays computed earlier, and the
+//! sums and scatter-adds that end the chain (its *sinks*). A region runs tile
+//! by tile (`TILE` elements): every op of the chain is applied to one tile
+//! before the next tile starts, so the intermediates stay in cache instead of
+//! streaming through main memory. Only values that leave the region (used by
+//! a later step, or asked for) are written to full-length buffers; the rest
+//! live in tile *slots*, and the backward pass recomputes them tile by tile
+//! before it runs the chain's vector-Jacobian products in reverse. Small
+//! regions keep every value instead (nothing to recompute).
+//!
+//! Tiles are split into one contiguous chunk per thread (rayon). Values that
+//! several chunks accumulate into (gradients of gathered-from arrays and of
+//! broadcast scalars, scatter-add outputs) get a private buffer per extra
+//! chunk, reduced once at the end. Sums are reduced per tile and added in tile
+//! order, so their value does not depend on the thread count.
+//!
+//! Everything else (slice, concat, custom ops) runs as a *plain* step over
+//! whole arrays.
+
+use std::ops::Range;
+
+use rayon::prelude::*;
+
+use crate::ops::custom::CustomOp;
+use crate::real::Real;
+use crate::tape::{Graph, NONE, Node, NonFinite, Op};
+
+/// Elements per tile: a chain of a few dozen ops keeps its tile values and
+/// adjoints (2 x 4 bytes x TILE per op) within the per-core L2 cache.
+pub(crate) const TILE: usize = 2048;
+/// Regions below this length run on the calling thread.
+const PARALLEL_MIN_LEN: usize = 1 << 15;
+/// Regions whose values total at most this many elements keep them all
+/// (no recomputation in the backward pass).
+const KEEP_ALL_ELEMENTS: usize = 1 << 16;
+
+/// Where an op reads one of its inputs during a region's run.
+#[derive(Clone, Copy, Debug)]
+enum Src {
+    /// A tile slot of a value computed in this region.
+    Slot(u32),
+    /// A full-length buffer (index into the region's array table).
+    Array(u32),
+    /// A length-1 array broadcast over the tile (index into the region's broadcasts).
+    Bcast(u32),
+}
+
+/// Where an op writes its output during a region's run.
+#[derive(Clone, Copy, Debug)]
+enum Out {
+    Slot(u32),
+    /// Full-length buffer: array-table index.
+    Array(u32),
+    /// Sum sink: index of its per-tile partials, array-table index of its value.
+    Sum(u32, u32),
+    /// Scatter-add sink: index among the region's accumulated targets, array-table index.
+    Scatter(u32, u32),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Instr {
+    node: u32,
+    ins: [Src; 3],
+    out: Out,
+}
+
+#[derive(Clone, Debug)]
+struct Region {
+    len: usize,
+    nodes: Range<u32>,
+    instrs: Range<usize>,
+    /// Node ids of the region's full-length arrays (external inputs, kept values, sinks).
+    arrays: Range<usize>,
+    /// Node ids of the broadcast scalars.
+    bcasts: Range<usize>,
+    /// Arrays that several chunks accumulate into: (array-table index,
+    /// whether it is a scatter output (forward) or a gather source (backward)).
+    shared: Range<usize>,
+    slots: usize,
+    sums: usize,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Step {
+    Region(u32),
+    Plain(u32),
+}
+
+/// Raw view of a buffer shared by the chunks of a region's run. Chunks write
+/// disjoint tile ranges of it, or (accumulating targets) only chunk 0 does.
+#[derive(Clone, Copy)]
+struct Ptr<T> {
+    ptr: *mut T,
+    len: usize,
+}
+// SAFETY: see the struct's comment: concurrent accesses never overlap.
+unsafe impl<T: Send> Send for Ptr<T> {}
+unsafe impl<T: Sync> Sync for Ptr<T> {}
+
+impl<T> Ptr<T> {
+    const NULL: Ptr<T> = Ptr {
+        ptr: std::ptr::null_mut(),
+        len: 0,
+    };
+    fn of(v: &mut [T]) -> Self {
+        Ptr {
+            ptr: v.as_mut_ptr(),
+            len: v.len(),
+        }
+    }
+    /// Elements `start..start + n`.
+    ///
+    /// SAFETY: the range is in bounds, and no other live reference overlaps it
+    /// mutably (the executor's invariants).
+    #[inline(always)]
+    unsafe fn slice<'a>(self, start: usize, n: usize) -> &'a mut [T] {
+        debug_assert!(start + n <= self.len);
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.add(start), n) }
+    }
+}
+
+/// Per-chunk scratch: tile slots for values and adjoints, private
+/// accumulation buffers, broadcast-gradient sums, the first non-finite value.
+#[derive(Default)]
+struct Chunk<T> {
+    vals: Vec<T>,
+    adjs: Vec<T>,
+    privates: Vec<Vec<T>>,
+    bcast_grads: Vec<T>,
+    non_finite: Option<NonFinite>,
+}
+
+/// Planner state and scratch, owned by the graph.
+pub(crate) struct Executor<T> {
+    steps: Vec<Step>,
+    regions: Vec<Region>,
+    instrs: Vec<Instr>,
+    arrays: Vec<u32>,
+    bcasts: Vec<u32>,
+    shared: Vec<(u32, bool)>,
+    /// Node id -> index in the region being built (NONE elsewhere).
+    local: Vec<u32>,
+    live: Vec<bool>,
+    partials: Vec<f64>,
+    chunks: Vec<Chunk<T>>,
+    vals: Vec<Ptr<T>>,
+    adjs: Vec<Ptr<T>>,
+    bcast_values: Vec<T>,
+}
+
+impl<T> Default for Executor<T> {
+    fn default() -> Self {
+        Executor {
+            steps: Vec::new(),
+            regions: Vec::new(),
+            instrs: Vec::new(),
+            arrays: Vec::new(),
+            bcasts: Vec::new(),
+            shared: Vec::new(),
+            local: Vec::new(),
+            live: Vec::new(),
+            partials: Vec::new(),
+            chunks: Vec::new(),
+            vals: Vec::new(),
+            adjs: Vec::new(),
+            bcast_values: Vec::new(),
+        }
+    }
+}
+
+impl<T: Real> Executor<T> {
+    /// Forgets the steps of nodes at or after `end`.
+    pub(crate) fn truncate(&mut self, end: u32, nodes: &mut [Node<T>]) {
+        while let Some(&step) = self.steps.last() {
+            let first = match step {
+                Step::Region(r) => self.regions[r as usize].nodes.start,
+                Step::Plain(n) => n,
+            };
+            if first < end {
+                break;
+            }
+            self.steps.pop();
+            if let Step::Region(r) = step {
+                let reg = self.regions.pop().expect("a region step has a region");
+                debug_assert_eq!(r as usize, self.regions.len());
+                self.instrs.truncate(reg.instrs.start);
+                self.arrays.truncate(reg.arrays.start);
+                self.bcasts.truncate(reg.bcasts.start);
+                self.shared.truncate(reg.shared.start);
+            }
+        }
+        debug_assert!(
+            nodes
+                .iter()
+                .all(|n| n.step == NONE || (n.step as usize) < self.steps.len())
+        );
+    }
+
+    /// Bytes reserved by the scratch buffers.
+    pub(crate) fn reserved_bytes(&self) -> usize {
+        let t = std::mem::size_of::<T>();
+        self.chunks
+            .iter()
+            .map(|c| {
+                (c.vals.capacity() + c.adjs.capacity() + c.bcast_grads.capacity()) * t
+                    + c.privates.iter().map(|p| p.capacity() * t).sum::<usize>()
+            })
+            .sum::<usize>()
+            + self.partials.capacity() * 8
+    }
+}
+
+/// The length of the domain a tileable node iterates over, or None for plain ops.
+fn domain_len<T: Real>(g: &Graph<T>, id: u32) -> Option<usize> {
+    let n = &g.nodes[id as usize];
+    match n.op {
+        Op::Map(..) | Op::Gather => Some(n.len as usize),
+        Op::Sum | Op::ScatterAdd => Some(g.nodes[g.inputs(id)[0] as usize].len as usize),
+        _ => None,
+    }
+}
+
+fn is_sink<T>(op: &Op<T>) -> bool {
+    matches!(op, Op::Sum | Op::ScatterAdd)
+}
+
+fn is_input<T>(op: &Op<T>) -> bool {
+    matches!(op, Op::Leaf | Op::Constant)
+}
+
+impl<T: Real> Graph<T> {
+    /// Plans and runs every pending node; `want` must end up in a buffer.
+    pub(crate) fn execute(&mut self, want: Option<u32>) {
+        let start = self.executed;
+        if let Some(w) = want
+            && (w as usize) < start
+            && self.nodes[w as usize].value == NONE
+        {
+            self.rematerialize(w);
+        }
+        for id in start..self.nodes.len() {
+            for k in 0..self.nodes[id].num_inputs {
+                let i = self.edges[(self.nodes[id].first_input + k) as usize];
+                if (i as usize) < start && self.nodes[i as usize].value == NONE {
+                    self.rematerialize(i);
+                }
+            }
+        }
+        if start == self.nodes.len() {
+            return;
+        }
+        let first_step = self.exec.steps.len();
+        self.plan(start, want);
+        self.executed = self.nodes.len();
+        for s in first_step..self.exec.steps.len() {
+            match self.exec.steps[s] {
+                Step::Region(r) => {
+                    self.build_region(r as usize);
+                    self.run_region(r as usize, Pass::Forward { sinks: true });
+                }
+                Step::Plain(id) => self.plain_forward(id),
+            }
+        }
+    }
+
+    /// Assigns pending nodes to steps and decides which values get buffers.
+    fn plan(&mut self, start: usize, want: Option<u32>) {
+        let end = self.nodes.len();
+        let mut open: Option<u32> = None;
+        for id in start as u32..end as u32 {
+            let op = self.nodes[id as usize].op;
+            if is_input(&op) {
+                continue;
+            }
+            let domain = domain_len(self, id);
+            if let (Some(r), Some(len)) = (open, domain)
+                && self.fits(r, id, len)
+            {
+                let region = &mut self.exec.regions[r as usize];
+                self.nodes[id as usize].step = self.nodes[region.nodes.start as usize].step;
+                region.nodes.end = id + 1;
+                continue;
+            }
+            let step = self.exec.steps.len() as u32;
+            self.nodes[id as usize].step = step;
+            match domain {
+                Some(len) => {
+                    let r = self.exec.regions.len() as u32;
+                    self.exec.regions.push(Region {
+                        len,
+                        nodes: id..id + 1,
+                        instrs: 0..0,
+                        arrays: 0..0,
+                        bcasts: 0..0,
+                        shared: 0..0,
+                        slots: 0,
+                        sums: 0,
+                    });
+                    self.exec.steps.push(Step::Region(r));
+                    open = Some(r);
+                }
+                None => {
+                    self.exec.steps.push(Step::Plain(id));
+                    self.nodes[id as usize].materialize = true;
+                    open = None;
+                }
+            }
+        }
+        for id in start..end {
+            let n = self.nodes[id];
+            if is_input(&n.op) {
+                continue;
+            }
+            for k in 0..n.num_inputs {
+                let i = self.edges[(n.first_input + k) as usize] as usize;
+                let inp = &self.nodes[i];
+                if !is_input(&inp.op) && i >= start && inp.step != n.step {
+                    self.nodes[i].materialize = true;
+                }
+            }
+            if is_sink(&n.op) {
+                self.nodes[id].materialize = true;
+            }
+        }
+        if let Some(w) = want {
+            self.nodes[w as usize].materialize = true;
+        }
+    }
+
+    /// Whether pending node `id` (domain `len`) can join the open region `r`.
+    fn fits(&self, r: u32, id: u32, len: usize) -> bool {
+        let reg = &self.exec.regions[r as usize];
+        if len != reg.len {
+            return false;
+        }
+        let step = self.nodes[reg.nodes.start as usize].step;
+        let op = self.nodes[id as usize].op;
+        self.inputs(id).iter().enumerate().all(|(k, &i)| {
+            let inp = &self.nodes[i as usize];
+            let member = inp.step == step && !is_input(&inp.op) && (i as usize) >= self.executed;
+            // A sink's value is complete only after the region: its users start a new one.
+            // A gather reads its whole source: the source must be complete too.
+            !(member && (is_sink(&inp.op) || (matches!(op, Op::Gather) && k == 0)))
+        })
+    }
+
+    /// Index of node `i` in the region's array table, added on first use.
+    fn array_of(&mut self, i: u32, base: usize) -> u32 {
+        if self.exec.local.len() < self.nodes.len() {
+            self.exec.local.resize(self.nodes.len(), NONE);
+        }
+        if self.exec.local[i as usize] == NONE {
+            self.exec.local[i as usize] = (self.exec.arrays.len() - base) as u32;
+            self.exec.arrays.push(i);
+        }
+        self.exec.local[i as usize]
+    }
+
+    /// Builds region `r`'s instructions from its members' materialize flags
+    /// (called again when a member is rematerialised).
+    fn build_region(&mut self, r: usize) {
+        let reg = self.exec.regions[r].clone();
+        let step = self.nodes[reg.nodes.start as usize].step;
+        let keep_all = {
+            let members = (reg.nodes.start..reg.nodes.end)
+                .filter(|&i| self.nodes[i as usize].step == step && !is_input(&self.nodes[i as usize].op))
+                .count();
+            members * reg.len <= KEEP_ALL_ELEMENTS
+        };
+        let (i0, a0, b0) = (self.exec.instrs.len(), self.exec.arrays.len(), self.exec.bcasts.len());
+        let s0 = self.exec.shared.len();
+        let (mut slots, mut sums) = (0u32, 0u32);
+        for id in reg.nodes.clone() {
+            let n = self.nodes[id as usize];
+            if n.step != step || is_input(&n.op) {
+                continue;
+            }
+            let mut ins = [Src::Slot(0); 3];
+            let num = n.num_inputs as usize;
+            for k in 0..num {
+                let i = self.edges[n.first_input as usize + k];
+                let inp = self.nodes[i as usize];
+                ins[k] = if inp.step == step && !is_input(&inp.op) && inp.value == NONE {
+                    Src::Slot(inp.slot)
+                } else if inp.len as usize == reg.len || (matches!(n.op, Op::Gather) && k == 0) {
+                    Src::Array(self.array_of(i, a0))
+                } else {
+                    debug_assert_eq!(inp.len, 1);
+                    if self.exec.local.len() < self.nodes.len() {
+                        self.exec.local.resize(self.nodes.len(), NONE);
+                    }
+                    // Broadcasts share the local table; mark them apart by range.
+                    let pos = self.exec.bcasts[b0..].iter().position(|&b| b == i);
+                    Src::Bcast(match pos {
+                        Some(p) => p as u32,
+                        None => {
+                            self.exec.bcasts.push(i);
+                            (self.exec.bcasts.len() - b0 - 1) as u32
+                        }
+                    })
+                };
+            }
+            // Unused input positions read the first input (never written).
+            for k in num..3 {
+                ins[k] = ins[0];
+            }
+            if let Op::Gather = n.op {
+                let Src::Array(src) = ins[0] else {
+                    unreachable!("gather sources are arrays")
+                };
+                if !self.exec.shared[s0..].contains(&(src, false)) {
+                    self.exec.shared.push((src, false));
+                }
+            }
+            let out = match n.op {
+                Op::Sum | Op::ScatterAdd => {
+                    if n.value == NONE {
+                        let b = self.values.take(n.len as usize);
+                        self.nodes[id as usize].value = b;
+                    }
+                    let a = self.array_of(id, a0);
+                    if let Op::Sum = n.op {
+                        sums += 1;
+                        Out::Sum(sums - 1, a)
+                    } else {
+                        self.exec.shared.push((a, true));
+                        Out::Scatter((self.exec.shared.len() - s0 - 1) as u32, a)
+                    }
+                }
+                _ if n.materialize || keep_all => {
+                    if n.value == NONE {
+                        let b = self.values.take(n.len as usize);
+                        self.nodes[id as usize].value = b;
+                    }
+                    Out::Array(self.array_of(id, a0))
+                }
+                _ => {
+                    self.nodes[id as usize].slot = slots;
+                    slots += 1;
+                    Out::Slot(slots - 1)
+                }
+            };
+            self.exec.instrs.push(Instr { node: id, ins, out });
+        }
+        for &a in &self.exec.arrays[a0..] {
+            self.exec.local[a as usize] = NONE;
+        }
+        let reg = &mut self.exec.regions[r];
+        reg.instrs = i0..self.exec.instrs.len();
+        reg.arrays = a0..self.exec.arrays.len();
+        reg.bcasts = b0..self.exec.bcasts.len();
+        reg.shared = s0..self.exec.shared.len();
+        reg.slots = slots as usize;
+        reg.sums = sums as usize;
+    }
+
+    /// Gives an executed node whose value lived only in tiles a buffer, by
+    /// running its region's forward pass again (sinks are not re-accumulated).
+    pub(crate) fn rematerialize(&mut self, id: u32) {
+        let step = self.nodes[id as usize].step;
+        if step == NONE {
+            return;
+        }
+        let Step::Region(r) = self.exec.steps[step as usize] else {
+            unreachable!("plain steps always write buffers")
+        };
+        self.nodes[id as usize].materialize = true;
+        self.build_region(r as usize);
+        self.run_region(r as usize, Pass::Forward { sinks: false });
+    }
+
+    fn plain_forward(&mut self, id: u32) {
+        let n = self.nodes[id as usize];
+        let out = self.values.take(n.len as usize);
+        self.nodes[id as usize].value = out;
+        let (first, num) = (n.first_input as usize, n.num_inputs as usize);
+        let mut bufs = std::mem::take(&mut self.values.bufs);
+        let mut out_buf = std::mem::take(&mut bufs[out as usize]);
+        let input = |k: usize| -> &[T] {
+            let i = &self.nodes[self.edges[first + k] as usize];
+            &bufs[i.value as usize][..i.len as usize]
+        };
+        match n.op {
+            Op::Slice(start) => {
+                out_buf.copy_from_slice(&input(0)[start as usize..start as usize + n.len as usize]);
+            }
+            Op::Concat => {
+                let mut at = 0;
+                for k in 0..num {
+                    let x = input(k);
+                    out_buf[at..at + x.len()].copy_from_slice(x);
+                    at += x.len();
+                }
+            }
+            Op::Custom(c) => {
+                let op = &self.customs[c as usize];
+                let mut ins: [&[T]; crate::ops::custom::MAX_INPUTS] = [&[]; crate::ops::custom::MAX_INPUTS];
+                for (k, slot) in ins.iter_mut().enumerate().take(num) {
+                    *slot = input(k);
+                }
+                op.forward(&ins[..num], &mut out_buf);
+            }
+            _ => unreachable!("only plain ops run as plain steps"),
+        }
+        if self.check_finite && self.non_finite.is_none() {
+            self.non_finite = first_non_finite(&out_buf, id, n.op.name(), 0, false);
+        }
+        bufs[out as usize] = out_buf;
+        self.values.bufs = bufs;
+    }
+
+    /// Reverse sweep from `output` (length 1).
+    pub(crate) fn backward(&mut self, output: u32) {
+        self.execute(Some(output));
+        self.adjoints.used = 0;
+        for n in &mut self.nodes {
+            n.adjoint = NONE;
+        }
+        let ex = &mut self.exec;
+        ex.live.clear();
+        ex.live.resize(self.nodes.len(), false);
+        ex.live[output as usize] = self.nodes[output as usize].requires_grad;
+        for id in (0..=output as usize).rev() {
+            if ex.live[id] {
+                let n = &self.nodes[id];
+                for &i in &self.edges[n.first_input as usize..(n.first_input + n.num_inputs) as usize] {
+                    if self.nodes[i as usize].requires_grad {
+                        ex.live[i as usize] = true;
+                    }
+                }
+            }
+        }
+        let seed = self.adjoints.take_zeroed(1);
+        self.adjoints.bufs[seed as usize][0] = T::one();
+        self.nodes[output as usize].adjoint = seed;
+        if !self.exec.live[output as usize] {
+            return;
+        }
+        for s in (0..self.exec.steps.len()).rev() {
+            match self.exec.steps[s] {
+                Step::Region(r) => {
+                    let nodes = self.exec.regions[r as usize].nodes.clone();
+                    if nodes.start > output {
+                        continue;
+                    }
+                    let end = nodes.end.min(output + 1);
+                    if (nodes.start..end).any(|i| self.exec.live[i as usize]) {
+                        self.run_region(r as usize, Pass::Backward);
+                    }
+                }
+                Step::Plain(id) => {
+                    if id <= output && self.exec.live[id as usize] {
+                        self.plain_backward(id);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The adjoint buffer of node `i`, zeroed on first use.
+    fn adjoint_of(&mut self, i: u32) -> u32 {
+        if self.nodes[i as usize].adjoint == NONE {
+            let len = self.nodes[i as usize].len as usize;
+            self.nodes[i as usize].adjoint = self.adjoints.take_zeroed(len);
+        }
+        self.nodes[i as usize].adjoint
+    }
+
+    fn plain_backward(&mut self, id: u32) {
+        let n = self.nodes[id as usize];
+        let (first, num) = (n.first_input as usize, n.num_inputs as usize);
+        for k in 0..num {
+            let i = self.edges[first + k];
+            if self.exec.live[i as usize] {
+                self.adjoint_of(i);
+            }
+        }
+        let mut adj = std::mem::take(&mut self.adjoints.bufs);
+        let gy = std::mem::take(&mut adj[n.adjoint as usize]);
+        let input_grad = |adj: &mut Vec<Vec<T>>, k: usize| -> Option<Ptr<T>> {
+            let i = self.edges[first + k] as usize;
+            self.exec.live[i].then(|| Ptr::of(&mut adj[self.nodes[i].adjoint as usize][..self.nodes[i].len as usize]))
+        };
+        match n.op {
+            Op::Slice(start) => {
+                if let Some(g) = input_grad(&mut adj, 0) {
+                    // SAFETY: `g` is the only reference to that buffer.
+                    let g = unsafe { g.slice(start as usize, n.len as usize) };
+                    add_into(g, &gy[..n.len as usize]);
+                }
+            }
+            Op::Concat => {
+                let mut at = 0;
+                for k in 0..num {
+                    let len = self.nodes[self.edges[first + k] as usize].len as usize;
+                    if let Some(g) = input_grad(&mut adj, k) {
+                        // SAFETY: as above.
+                        add_into(unsafe { g.slice(0, len) }, &gy[at..at + len]);
+                    }
+                    at += len;
+                }
+            }
+            Op::Custom(c) => {
+                let op: &dyn CustomOp<T> = &*self.customs[c as usize];
+                let vals = &self.values.bufs;
+                let mut ins: [&[T]; crate::ops::custom::MAX_INPUTS] = [&[]; crate::ops::custom::MAX_INPUTS];
+                let mut grads: [Option<&mut [T]>; crate::ops::custom::MAX_INPUTS] = Default::default();
+                for k in 0..num {
+                    let i = &self.nodes[self.edges[first + k] as usize];
+                    ins[k] = &vals[i.value as usize][..i.len as usize];
+                    // SAFETY: distinct inputs have distinct adjoint buffers; an
+                    // input repeated in the list gets its gradient slot once.
+                    let repeated = (0..k).any(|j| self.edges[first + j] == self.edges[first + k]);
+                    if !repeated && let Some(g) = input_grad(&mut adj, k) {
+                        grads[k] = Some(unsafe { g.slice(0, i.len as usize) });
+                    }
+                }
+                op.vjp(
+                    &ins[..num],
+                    &vals[n.value as usize][..n.len as usize],
+                    &gy[..n.len as usize],
+                    &mut grads[..num],
+                );
+            }
+            _ => unreachable!("only plain ops run as plain steps"),
+        }
+        adj[n.adjoint as usize] = gy;
+        self.adjoints.bufs = adj;
+    }
+
+    /// Runs region `r` forward (optionally without its sinks) or backward.
+    fn run_region(&mut self, r: usize, pass: Pass) {
+        let reg = self.exec.regions[r].clone();
+        let backward = matches!(pass, Pass::Backward);
+        // Gradient buffers exist before the chunks start: kept values and
+        // external arrays that need a gradient, and the broadcast scalars.
+        if backward {
+            for a in reg.arrays.clone() {
+                let i = self.exec.arrays[a];
+                if self.exec.live[i as usize] {
+                    self.adjoint_of(i);
+                }
+            }
+            for b in reg.bcasts.clone() {
+                let i = self.exec.bcasts[b];
+                if self.exec.live[i as usize] {
+                    self.adjoint_of(i);
+                }
+            }
+        }
+        let ex = &mut self.exec;
+        ex.vals.clear();
+        ex.adjs.clear();
+        for a in reg.arrays.clone() {
+            let n = &self.nodes[ex.arrays[a] as usize];
+            ex.vals
+                .push(Ptr::of(&mut self.values.bufs[n.value as usize][..n.len as usize]));
+            ex.adjs.push(if n.adjoint == NONE {
+                Ptr::NULL
+            } else {
+                Ptr::of(&mut self.adjoints.bufs[n.adjoint as usize][..n.len as usize])
+            });
+        }
+        ex.bcast_values.clear();
+        for b in reg.bcasts.clone() {
+            let n = &self.nodes[ex.bcasts[b] as usize];
+            ex.bcast_values.push(self.values.bufs[n.value as usize][0]);
+        }
+        let tiles = reg.len.div_ceil(TILE);
+        let threads = if reg.len >= PARALLEL_MIN_LEN {
+            rayon::current_num_threads().min(tiles)
+        } else {
+            1
+        };
+        let tile_len = reg.len.min(TILE);
+        let per_chunk = (reg.slots + reg.bcasts.len()) * tile_len;
+        if ex.chunks.len() < threads {
+            ex.chunks.resize_with(threads, Chunk::default);
+        }
+        for (c, chunk) in ex.chunks[..threads].iter_mut().enumerate() {
+            chunk.vals.resize(per_chunk, T::zero());
+            if backward {
+                chunk.adjs.resize(per_chunk, T::zero());
+                chunk.bcast_grads.clear();
+                chunk.bcast_grads.resize(reg.bcasts.len(), T::zero());
+            }
+            chunk.non_finite = None;
+            // Chunk 0 accumulates straight into the real buffers; the others
+            // into private zeroed copies.
+            if chunk.privates.len() < reg.shared.len() {
+                chunk.privates.resize_with(reg.shared.len(), Vec::new);
+            }
+            for (s, p) in chunk.privates[..reg.shared.len()].iter_mut().enumerate() {
+                let (target, scatter) = ex.shared[reg.shared.start + s];
+                let needed = match pass {
+                    Pass::Forward { sinks } => sinks && scatter,
+                    Pass::Backward => !scatter && ex.live[ex.arrays[reg.arrays.start + target as usize] as usize],
+                };
+                let len = if c == 0 || !needed {
+                    0
+                } else {
+                    ex.vals[target as usize].len
+                };
+                p.clear();
+                p.resize(len, T::zero());
+            }
+        }
+        if matches!(pass, Pass::Forward { sinks: true }) {
+            // Scatter outputs start at zero (chunk 0 writes into them).
+            for ins in &ex.instrs[reg.instrs.clone()] {
+                if let Out::Scatter(_, a) = ins.out {
+                    // SAFETY: no chunk runs yet.
+                    unsafe { ex.vals[a as usize].slice(0, ex.vals[a as usize].len) }.fill(T::zero());
+                }
+            }
+        }
+        ex.partials.clear();
+        ex.partials.resize(tiles * reg.sums, 0.0);
+        let ctx = Ctx {
+            nodes: &self.nodes,
+            edges: &self.edges,
+            instrs: &ex.instrs[reg.instrs.clone()],
+            shared: &ex.shared[reg.shared.clone()],
+            vals: &ex.vals,
+            adjs: &ex.adjs,
+            bcast_values: &ex.bcast_values,
+            live: &ex.live,
+            partials: Ptr::of(&mut ex.partials),
+            len: reg.len,
+            tile_len,
+            slots: reg.slots,
+            sums: reg.sums,
+            check_finite: self.check_finite,
+            pass,
+        };
+        if threads == 1 {
+            ctx.run_chunk(&mut ex.chunks[0], 0, 0..tiles);
+        } else {
+            ex.chunks[..threads].par_iter_mut().enumerate().for_each(|(c, chunk)| {
+                ctx.run_chunk(chunk, c, tiles * c / threads..tiles * (c + 1) / threads);
+            });
+        }
+        // Reductions across chunks, in chunk order.
+        for (s, &(target, scatter)) in ex.shared[reg.shared.clone()].iter().enumerate() {
+            let dst = if backward {
+                ex.adjs[target as usize]
+            } else {
+                ex.vals[target as usize]
+            };
+            if dst.ptr.is_null() || scatter == backward {
+                continue;
+            }
+            // SAFETY: the chunks are done; `dst` is the only reference.
+            let dst = unsafe { dst.slice(0, dst.len) };
+            for chunk in &ex.chunks[1..threads] {
+                if !chunk.privates[s].is_empty() {
+                    add_into(dst, &chunk.privates[s]);
+                }
+            }
+        }
+        if backward {
+            for (b, k) in reg.bcasts.clone().enumerate() {
+                let i = ex.bcasts[k] as usize;
+                if ex.live[i] {
+                    let total = ex.chunks[..threads]
+                        .iter()
+                        .fold(T::zero(), |acc, c| acc + c.bcast_grads[b]);
+                    let a = self.nodes[i].adjoint as usize;
+                    self.adjoints.bufs[a][0] = self.adjoints.bufs[a][0] + total;
+                }
+            }
+        }
+        if matches!(pass, Pass::Forward { sinks: true }) {
+            let mut k = 0;
+            for ins in &ex.instrs[reg.instrs.clone()] {
+                if let Out::Sum(p, a) = ins.out {
+                    let total: f64 = (0..tiles).map(|t| ex.partials[t * reg.sums + p as usize]).sum();
+                    // SAFETY: the chunks are done.
+                    let v = unsafe { ex.vals[a as usize].slice(0, 1) };
+                    v[0] = T::c(total);
+                    k += 1;
+                }
+            }
+            debug_assert_eq!(k, reg.sums);
+        }
+        if self.check_finite && self.non_finite.is_none() {
+            self.non_finite = ex.chunks[..threads]
+                .iter()
+                .filter_map(|c| c.non_finite.clone())
+                .min_by_key(|nf| (nf.node, nf.index));
+            if self.non_finite.is_none() && !backward {
+                for ins in &ex.instrs[reg.instrs.clone()] {
+                    if let Out::Sum(_, a) = ins.out {
+                        // SAFETY: the chunks are done.
+                        let v = unsafe { ex.vals[a as usize].slice(0, 1) };
+                        if let Some(nf) = first_non_finite(v, ins.node, "sum", 0, false) {
+                            self.non_finite = Some(nf);
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Which pass a region runs.
+#[derive(Clone, Copy, Debug)]
+enum Pass {
+    Forward { sinks: bool },
+    Backward,
+}
+
+/// What the chunks of one region run share (read-only, or written through
+/// `Ptr`s at disjoint places).
+struct Ctx<'a, T: Real> {
+    nodes: &'a [Node<T>],
+    edges: &'a [u32],
+    instrs: &'a [Instr],
+    shared: &'a [(u32, bool)],
+    vals: &'a [Ptr<T>],
+    adjs: &'a [Ptr<T>],
+    bcast_values: &'a [T],
+    live: &'a [bool],
+    partials: Ptr<f64>,
+    len: usize,
+    tile_len: usize,
+    slots: usize,
+    sums: usize,
+    check_finite: bool,
+    pass: Pass,
+}
+
+impl<T: Real> Ctx<'_, T> {
+    fn run_chunk(&self, chunk: &mut Chunk<T>, c: usize, tiles: Range<usize>) {
+        let tl = self.tile_len;
+        for (b, &v) in self.bcast_values.iter().enumerate() {
+            chunk.vals[(self.slots + b) * tl..(self.slots + b + 1) * tl].fill(v);
+        }
+        let vals = Ptr::of(&mut chunk.vals);
+        let adjs = Ptr::of(&mut chunk.adjs);
+        let mut privates: [Ptr<T>; 8] = [Ptr::NULL; 8];
+        let privates: &mut [Ptr<T>] = if chunk.privates.len() <= 8 {
+            for (p, v) in privates.iter_mut().zip(chunk.privates.iter_mut()) {
+                *p = Ptr::of(v);
+            }
+            &mut privates[..chunk.privates.len()]
+        } else {
+            panic!("autodiff: a region gathers from or scatters into more than 8 distinct arrays")
+        };
+        for t in tiles {
+            let t0 = t * TILE;
+            let n = TILE.min(self.len - t0);
+            let tile = Tile {
+                t0,
+                n,
+                vals,
+                adjs,
+                privates: &*privates,
+                chunk: c,
+            };
+            match self.pass {
+                Pass::Forward { sinks } => {
+                    self.forward_tile(&tile, sinks, false, &mut chunk.non_finite, t);
+                }
+                Pass::Backward => {
+                    self.forward_tile(&tile, false, true, &mut chunk.non_finite, t);
+                    self.backward_tile(&tile, &mut chunk.bcast_grads, &mut chunk.non_finite);
+                }
+            }
+        }
+    }
+
+    /// Value of source `s` over the tile.
+    #[inline(always)]
+    fn value<'b>(&self, tile: &Tile<'_, T>, s: Src) -> &'b [T] {
+        // SAFETY: slots and broadcasts belong to this chunk; array reads cover
+        // the tile's own range, written only by this chunk (or before the run).
+        unsafe {
+            match s {
+                Src::Slot(k) => tile.vals.slice(k as usize * self.tile_len, tile.n),
+                Src::Array(a) => self.vals[a as usize].slice(tile.t0, tile.n),
+                Src::Bcast(b) => tile.vals.slice((self.slots + b as usize) * self.tile_len, tile.n),
+            }
+        }
+    }
+
+    /// Adjoint of source `s` over the tile (None when no gradient flows there).
+    #[inline(always)]
+    fn adjoint<'b>(&self, tile: &Tile<'_, T>, s: Src) -> Option<&'b mut [T]> {
+        // SAFETY: as for `value`; adjoint buffers of arrays exist when live.
+        unsafe {
+            match s {
+                Src::Slot(k) => Some(tile.adjs.slice(k as usize * self.tile_len, tile.n)),
+                Src::Array(a) => {
+                    let p = self.adjs[a as usize];
+                    (!p.ptr.is_null()).then(|| p.slice(tile.t0, tile.n))
+                }
+                Src::Bcast(b) => Some(tile.adjs.slice((self.slots + b as usize) * self.tile_len, tile.n)),
+            }
+        }
+    }
+
+    fn out_src(out: Out) -> Src {
+        match out {
+            Out::Slot(k) => Src::Slot(k),
+            Out::Array(a) | Out::Sum(_, a) | Out::Scatter(_, a) => Src::Array(a),
+        }
+    }
+
+    /// Forward over one tile. `recompute`: only the values that live in
+    /// slots (the others are in buffers already), and no sinks.
+    fn forward_tile(&self, tile: &Tile<'_, T>, sinks: bool, recompute: bool, nf: &mut Option<NonFinite>, t: usize) {
+        for ins in self.instrs {
+            let node = &self.nodes[ins.node as usize];
+            let slot_out = matches!(ins.out, Out::Slot(_));
+            match node.op {
+                Op::Map(kind, p) => {
+                    if recompute && !slot_out {
+                        continue;
+                    }
+                    let x = [
+                        self.value(tile, ins.ins[0]),
+                        self.value(tile, ins.ins[1]),
+                        self.value(tile, ins.ins[2]),
+                    ];
+                    let y = self.out_mut(tile, ins.out);
+                    kind.forward(x, y, p);
+                    if self.check_finite && nf.is_none() {
+                        *nf = first_non_finite(y, ins.node, kind.name(), tile.t0, false);
+                    }
+                }
+                Op::Gather => {
+                    if recompute && !slot_out {
+                        continue;
+                    }
+                    let Src::Array(s) = ins.ins[0] else { unreachable!() };
+                    // SAFETY: the source is complete and only read.
+                    let source = unsafe { self.vals[s as usize].slice(0, self.vals[s as usize].len) };
+                    let idx = self.value(tile, ins.ins[1]);
+                    let y = self.out_mut(tile, ins.out);
+                    for (y, &i) in y.iter_mut().zip(idx) {
+                        *y = source[index(i, source.len(), "gather")];
+                    }
+                    if self.check_finite && nf.is_none() {
+                        *nf = first_non_finite(y, ins.node, "gather", tile.t0, false);
+                    }
+                }
+                Op::Sum if sinks => {
+                    let Out::Sum(k, _) = ins.out else { unreachable!() };
+                    let x = self.value(tile, ins.ins[0]);
+                    // SAFETY: each tile owns its partials.
+                    let partial = unsafe { self.partials.slice(t * self.sums + k as usize, 1) };
+                    partial[0] = sum(x).f64();
+                }
+                Op::ScatterAdd if sinks => {
+                    let Out::Scatter(s, a) = ins.out else { unreachable!() };
+                    let target = self.accumulator(tile, s, self.vals[a as usize]);
+                    let x = self.value(tile, ins.ins[0]);
+                    let idx = self.value(tile, ins.ins[1]);
+                    let len = target.len();
+                    for (&x, &i) in x.iter().zip(idx) {
+                        target[index(i, len, "scatter_add")] += x;
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// Chunk 0 accumulates into the real buffer, the others into their private copy.
+    #[inline(always)]
+    fn accumulator<'b>(&self, tile: &Tile<'_, T>, s: u32, real: Ptr<T>) -> &'b mut [T] {
+        let p = if tile.chunk == 0 {
+            real
+        } else {
+            tile.privates[s as usize]
+        };
+        // SAFETY: chunk 0 is the only writer of the real buffer during the run.
+        unsafe { p.slice(0, p.len) }
+    }
+
+    #[inline(always)]
+    fn out_mut<'b>(&self, tile: &Tile<'_, T>, out: Out) -> &'b mut [T] {
+        // SAFETY: a node's output slot or tile range is written by this chunk only.
+        unsafe {
+            match out {
+                Out::Slot(k) => tile.vals.slice(k as usize * self.tile_len, tile.n),
+                Out::Array(a) => self.vals[a as usize].slice(tile.t0, tile.n),
+                Out::Sum(..) | Out::Scatter(..) => unreachable!("sinks have no tile output"),
+            }
+        }
+    }
+
+    /// Vector-Jacobian products over one tile, in reverse.
+    fn backward_tile(&self, tile: &Tile<'_, T>, bcast_grads: &mut [T], nf: &mut Option<NonFinite>) {
+        let tl = self.tile_len;
+        // SAFETY: this chunk's scratch.
+        unsafe { tile.adjs.slice(0, (self.slots + bcast_grads.len()) * tl) }.fill(T::zero());
+        for ins in self.instrs.iter().rev() {
+            let id = ins.node as usize;
+            if !self.live[id] {
+                continue;
+            }
+            let node = &self.nodes[id];
+            let first = node.first_input as usize;
+            let live_input = |k: usize| self.live[self.edges[first + k] as usize];
+            match node.op {
+                Op::Sum => {
+                    let Out::Sum(_, a) = ins.out else { unreachable!() };
+                    // SAFETY: the sum's adjoint exists (it is live) and is only read.
+                    let seed = unsafe { self.adjs[a as usize].slice(0, 1) }[0];
+                    if let Some(g) = self.adjoint(tile, ins.ins[0]) {
+                        for g in g.iter_mut() {
+                            *g = *g + seed;
+                        }
+                    }
+                }
+                Op::ScatterAdd => {
+                    let Out::Scatter(_, a) = ins.out else { unreachable!() };
+                    // SAFETY: as above.
+                    let gy = unsafe { self.adjs[a as usize].slice(0, self.adjs[a as usize].len) };
+                    let idx = self.value(tile, ins.ins[1]);
+                    if let Some(g) = self.adjoint(tile, ins.ins[0]) {
+                        for (g, &i) in g.iter_mut().zip(idx) {
+                            *g = *g + gy[index(i, gy.len(), "scatter_add")];
+                        }
+                    }
+                }
+                Op::Map(kind, p) => {
+                    let out = Self::out_src(ins.out);
+                    let y = self.value(tile, out);
+                    let Some(gy) = self.adjoint(tile, out) else { continue };
+                    let x = [
+                        self.value(tile, ins.ins[0]),
+                        self.value(tile, ins.ins[1]),
+                        self.value(tile, ins.ins[2]),
+                    ];
+                    for k in 0..kind.arity() {
+                        if !live_input(k) {
+                            continue;
+                        }
+                        if let Some(gx) = self.adjoint(tile, ins.ins[k]) {
+                            kind.backward(k, x, y, gy, gx, p);
+                            if self.check_finite && nf.is_none() {
+                                *nf = first_non_finite(gx, ins.node, kind.name(), tile.t0, true);
+                            }
+                        }
+                    }
+                }
+                Op::Gather => {
+                    if !live_input(0) {
+                        continue;
+                    }
+                    let Src::Array(s) = ins.ins[0] else { unreachable!() };
+                    let Some(gy) = self.adjoint(tile, Self::out_src(ins.out)) else {
+                        continue;
+                    };
+                    let pos = self
+                        .shared
+                        .iter()
+                        .position(|&x| x == (s, false))
+                        .expect("gather sources are shared targets");
+                    let target = self.accumulator(tile, pos as u32, self.adjs[s as usize]);
+                    let idx = self.value(tile, ins.ins[1]);
+                    let len = target.len();
+                    for (&g, &i) in gy.iter().zip(idx) {
+                        let j = index(i, len, "gather");
+                        target[j] = target[j] + g;
+                    }
+                }
+                _ => {}
+            }
+        }
+        for (b, acc) in bcast_grads.iter_mut().enumerate() {
+            // SAFETY: this chunk's scratch.
+            let g = unsafe { tile.adjs.slice((self.slots + b) * tl, tile.n) };
+            *acc = *acc + sum(g);
+        }
+    }
+}
+
+/// One tile of a chunk's run.
+struct Tile<'p, T> {
+    t0: usize,
+    n: usize,
+    vals: Ptr<T>,
+    adjs: Ptr<T>,
+    privates: &'p [Ptr<T>],
+    chunk: usize,
+}
+
+/// An index carried as a float, checked against the target's length.
+#[inline(always)]
+fn index<T: Real>(i: T, len: usize, op: &str) -> usize {
+    let j = i.to_usize().unwrap_or(usize::MAX);
+    if j >= len {
+        panic!("{op}: index {i} out of range for an array of {len} elements");
+    }
+    j
+}
+
+/// Sum with 16 independent accumulators (vectorises; exact order is fixed).
+#[inline]
+pub(crate) fn sum<T: Real>(x: &[T]) -> T {
+    let mut acc = [T::zero(); 16];
+    let chunks = x.chunks_exact(16);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (a, &v) in acc.iter_mut().zip(c) {
+            *a = *a + v;
+        }
+    }
+    let mut s = rest.iter().fold(T::zero(), |s, &v| s + v);
+    for a in acc {
+        s = s + a;
+    }
+    s
+}
+
+/// dst += src.
+#[inline]
+pub(crate) fn add_into<T: Real>(dst: &mut [T], src: &[T]) {
+    for (d, &s) in dst.iter_mut().zip(src) {
+        *d = *d + s;
+    }
+}
+
+fn first_non_finite<T: Real>(
+    x: &[T],
+    node: u32,
+    op: &'static str,
+    offset: usize,
+    in_backward: bool,
+) -> Option<NonFinite> {
+    x.iter().position(|v| !v.is_finite()).map(|k| NonFinite {
+        node: node as usize,
+        op,
+        index: offset + k,
+        value: x[k].f64(),
+        in_backward,
+    })
+}
