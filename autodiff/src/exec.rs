@@ -11,11 +11,13 @@
 //! before it runs the chain's vector-Jacobian products in reverse. Small
 //! regions keep every value instead (nothing to recompute).
 //!
-//! Tiles are split into one contiguous chunk per thread (rayon). Values that
-//! several chunks accumulate into (gradients of gathered-from arrays and of
-//! broadcast scalars, scatter-add outputs) get a private buffer per extra
-//! chunk, reduced once at the end. Sums are reduced per tile and added in tile
-//! order, so their value does not depend on the thread count.
+//! Long regions are cut into a fixed number of contiguous chunks of tiles,
+//! run on rayon's threads. Values that several chunks accumulate into
+//! (gradients of gathered-from arrays and of broadcast scalars, scatter-add
+//! outputs) get a private buffer per extra chunk, reduced in chunk order at
+//! the end; sums are reduced per tile and added in tile order. The cut
+//! depends only on the length, so results are bit-identical for any number
+//! of threads.
 //!
 //! Everything else (slice, concat, custom ops) runs as a *plain* step over
 //! whole arrays.
@@ -30,9 +32,13 @@ use crate::tape::{Graph, NONE, Node, NonFinite, Op};
 
 /// Elements per tile: a chain of a few dozen ops keeps its tile values and
 /// adjoints (2 x 4 bytes x TILE per op) within the per-core L2 cache.
-pub(crate) const TILE: usize = 2048;
+pub(crate) const TILE: usize = 1024;
 /// Regions below this length run on the calling thread.
 const PARALLEL_MIN_LEN: usize = 1 << 15;
+/// Longer regions are cut into this many chunks of tiles, spread over the
+/// threads: enough for this project's 2-4 core machines, and few enough that
+/// the private accumulation buffers of the extra chunks stay cheap.
+const CHUNKS: usize = 4;
 /// Regions whose values total at most this many elements keep them all
 /// (no recomputation in the backward pass).
 const KEEP_ALL_ELEMENTS: usize = 1 << 16;
@@ -144,6 +150,8 @@ pub(crate) struct Executor<T> {
     /// Node id -> index in the region being built (NONE elsewhere).
     local: Vec<u32>,
     live: Vec<bool>,
+    overwrite: Vec<u8>,
+    touched: Vec<bool>,
     partials: Vec<f64>,
     chunks: Vec<Chunk<T>>,
     vals: Vec<Ptr<T>>,
@@ -162,6 +170,8 @@ impl<T> Default for Executor<T> {
             shared: Vec::new(),
             local: Vec::new(),
             live: Vec::new(),
+            overwrite: Vec::new(),
+            touched: Vec::new(),
             partials: Vec::new(),
             chunks: Vec::new(),
             vals: Vec::new(),
@@ -199,6 +209,45 @@ impl<T: Real> Executor<T> {
         );
     }
 
+    /// Marks, for the region's backward pass, each contribution that is the
+    /// first (in reverse order) to its tile slot: it writes instead of adding.
+    fn overwrite_flags(&mut self, nodes: &[Node<T>], edges: &[u32], reg: &Region) {
+        let instrs = &self.instrs[reg.instrs.clone()];
+        self.overwrite.clear();
+        self.overwrite.resize(instrs.len(), 0);
+        self.touched.clear();
+        self.touched
+            .resize(reg.slots + reg.bcasts.len() + reg.arrays.len(), false);
+        for (j, ins) in instrs.iter().enumerate().rev() {
+            let node = &nodes[ins.node as usize];
+            if !self.live[ins.node as usize] {
+                continue;
+            }
+            let inputs = match node.op {
+                Op::Map(kind, _) => kind.arity(),
+                Op::Sum | Op::ScatterAdd => 1,
+                _ => 0,
+            };
+            for k in 0..inputs {
+                if !self.live[edges[node.first_input as usize + k] as usize] {
+                    continue;
+                }
+                let target = match ins.ins[k] {
+                    Src::Slot(s) => s as usize,
+                    Src::Bcast(b) => reg.slots + b as usize,
+                    Src::Array(a) if nodes[self.arrays[reg.arrays.start + a as usize] as usize].fresh => {
+                        reg.slots + reg.bcasts.len() + a as usize
+                    }
+                    Src::Array(_) => continue,
+                };
+                if !self.touched[target] {
+                    self.touched[target] = true;
+                    self.overwrite[j] |= 1 << k;
+                }
+            }
+        }
+    }
+
     /// Bytes reserved by the scratch buffers.
     pub(crate) fn reserved_bytes(&self) -> usize {
         let t = std::mem::size_of::<T>();
@@ -217,7 +266,7 @@ impl<T: Real> Executor<T> {
 fn domain_len<T: Real>(g: &Graph<T>, id: u32) -> Option<usize> {
     let n = &g.nodes[id as usize];
     match n.op {
-        Op::Map(..) | Op::Gather => Some(n.len as usize),
+        Op::Map(..) | Op::Gather { .. } => Some(n.len as usize),
         Op::Sum | Op::ScatterAdd => Some(g.nodes[g.inputs(id)[0] as usize].len as usize),
         _ => None,
     }
@@ -234,6 +283,13 @@ fn is_input<T>(op: &Op<T>) -> bool {
 impl<T: Real> Graph<T> {
     /// Plans and runs every pending node; `want` must end up in a buffer.
     pub(crate) fn execute(&mut self, want: Option<u32>) {
+        self.run_pending(want, None);
+    }
+
+    /// [`execute`](Self::execute), except that when `fuse` (a pending sum) ends
+    /// up in the last region, that region is only built, not run: its index
+    /// is returned so that the caller runs it forward and backward in one pass.
+    fn run_pending(&mut self, want: Option<u32>, fuse: Option<u32>) -> Option<usize> {
         let start = self.executed;
         if let Some(w) = want
             && (w as usize) < start
@@ -250,20 +306,25 @@ impl<T: Real> Graph<T> {
             }
         }
         if start == self.nodes.len() {
-            return;
+            return None;
         }
         let first_step = self.exec.steps.len();
         self.plan(start, want);
         self.executed = self.nodes.len();
-        for s in first_step..self.exec.steps.len() {
+        let last = self.exec.steps.len() - 1;
+        for s in first_step..=last {
             match self.exec.steps[s] {
                 Step::Region(r) => {
                     self.build_region(r as usize);
+                    if s == last && fuse.is_some_and(|f| self.nodes[f as usize].step as usize == s) {
+                        return Some(r as usize);
+                    }
                     self.run_region(r as usize, Pass::Forward { sinks: true });
                 }
                 Step::Plain(id) => self.plain_forward(id),
             }
         }
+        None
     }
 
     /// Assigns pending nodes to steps and decides which values get buffers.
@@ -343,7 +404,7 @@ impl<T: Real> Graph<T> {
             let member = inp.step == step && !is_input(&inp.op) && (i as usize) >= self.executed;
             // A sink's value is complete only after the region: its users start a new one.
             // A gather reads its whole source: the source must be complete too.
-            !(member && (is_sink(&inp.op) || (matches!(op, Op::Gather) && k == 0)))
+            !(member && (is_sink(&inp.op) || (matches!(op, Op::Gather { .. }) && k == 0)))
         })
     }
 
@@ -380,12 +441,12 @@ impl<T: Real> Graph<T> {
             }
             let mut ins = [Src::Slot(0); 3];
             let num = n.num_inputs as usize;
-            for k in 0..num {
+            for (k, src) in ins.iter_mut().enumerate().take(num) {
                 let i = self.edges[n.first_input as usize + k];
                 let inp = self.nodes[i as usize];
-                ins[k] = if inp.step == step && !is_input(&inp.op) && inp.value == NONE {
+                *src = if inp.step == step && !is_input(&inp.op) && inp.value == NONE {
                     Src::Slot(inp.slot)
-                } else if inp.len as usize == reg.len || (matches!(n.op, Op::Gather) && k == 0) {
+                } else if inp.len as usize == reg.len || (matches!(n.op, Op::Gather { .. }) && k == 0) {
                     Src::Array(self.array_of(i, a0))
                 } else {
                     debug_assert_eq!(inp.len, 1);
@@ -407,7 +468,7 @@ impl<T: Real> Graph<T> {
             for k in num..3 {
                 ins[k] = ins[0];
             }
-            if let Op::Gather = n.op {
+            if let Op::Gather { .. } = n.op {
                 let Src::Array(src) = ins[0] else {
                     unreachable!("gather sources are arrays")
                 };
@@ -514,7 +575,11 @@ impl<T: Real> Graph<T> {
 
     /// Reverse sweep from `output` (length 1).
     pub(crate) fn backward(&mut self, output: u32) {
-        self.execute(Some(output));
+        // A loss that is the sum ending the last pending region has adjoint 1
+        // before its value is known: that region runs forward and backward
+        // in one pass over its tiles (no recomputation).
+        let pending_sum = output as usize >= self.executed && matches!(self.nodes[output as usize].op, Op::Sum);
+        let fused = self.run_pending(Some(output), pending_sum.then_some(output));
         self.adjoints.used = 0;
         for n in &mut self.nodes {
             n.adjoint = NONE;
@@ -537,10 +602,18 @@ impl<T: Real> Graph<T> {
         self.adjoints.bufs[seed as usize][0] = T::one();
         self.nodes[output as usize].adjoint = seed;
         if !self.exec.live[output as usize] {
+            if let Some(r) = fused {
+                self.run_region(r, Pass::Forward { sinks: true });
+            }
+            self.zero_missing_leaf_gradients();
             return;
+        }
+        if let Some(r) = fused {
+            self.run_region(r, Pass::Fused);
         }
         for s in (0..self.exec.steps.len()).rev() {
             match self.exec.steps[s] {
+                Step::Region(r) if Some(r as usize) == fused => {}
                 Step::Region(r) => {
                     let nodes = self.exec.regions[r as usize].nodes.clone();
                     if nodes.start > output {
@@ -556,6 +629,16 @@ impl<T: Real> Graph<T> {
                         self.plain_backward(id);
                     }
                 }
+            }
+        }
+        self.zero_missing_leaf_gradients();
+    }
+
+    /// Every leaf gets a gradient, zero where the output does not depend on it.
+    fn zero_missing_leaf_gradients(&mut self) {
+        for id in 0..self.nodes.len() as u32 {
+            if matches!(self.nodes[id as usize].op, Op::Leaf) {
+                self.adjoint_of(id);
             }
         }
     }
@@ -634,14 +717,24 @@ impl<T: Real> Graph<T> {
     /// Runs region `r` forward (optionally without its sinks) or backward.
     fn run_region(&mut self, r: usize, pass: Pass) {
         let reg = self.exec.regions[r].clone();
-        let backward = matches!(pass, Pass::Backward);
+        let backward = pass.backward();
         // Gradient buffers exist before the chunks start: kept values and
         // external arrays that need a gradient, and the broadcast scalars.
         if backward {
             for a in reg.arrays.clone() {
                 let i = self.exec.arrays[a];
-                if self.exec.live[i as usize] {
+                let gathered = self.exec.shared[reg.shared.clone()].contains(&((a - reg.arrays.start) as u32, false));
+                if !self.exec.live[i as usize] || self.nodes[i as usize].adjoint != NONE {
+                    continue;
+                }
+                if gathered {
                     self.adjoint_of(i);
+                } else {
+                    // Nothing was added yet: the region's first contribution
+                    // per element writes instead of adding (no zeroing pass).
+                    let len = self.nodes[i as usize].len as usize;
+                    self.nodes[i as usize].adjoint = self.adjoints.take(len);
+                    self.nodes[i as usize].fresh = true;
                 }
             }
             for b in reg.bcasts.clone() {
@@ -670,8 +763,11 @@ impl<T: Real> Graph<T> {
             ex.bcast_values.push(self.values.bufs[n.value as usize][0]);
         }
         let tiles = reg.len.div_ceil(TILE);
+        // The split depends on the length only, never on the thread count, so
+        // that accumulations (scatter outputs, gradients of gathered arrays and
+        // broadcast scalars) add up in the same order on any machine.
         let threads = if reg.len >= PARALLEL_MIN_LEN {
-            rayon::current_num_threads().min(tiles)
+            CHUNKS.min(tiles)
         } else {
             1
         };
@@ -695,9 +791,10 @@ impl<T: Real> Graph<T> {
             }
             for (s, p) in chunk.privates[..reg.shared.len()].iter_mut().enumerate() {
                 let (target, scatter) = ex.shared[reg.shared.start + s];
-                let needed = match pass {
-                    Pass::Forward { sinks } => sinks && scatter,
-                    Pass::Backward => !scatter && ex.live[ex.arrays[reg.arrays.start + target as usize] as usize],
+                let needed = if scatter {
+                    pass.forward_sinks()
+                } else {
+                    backward && ex.live[ex.arrays[reg.arrays.start + target as usize] as usize]
                 };
                 let len = if c == 0 || !needed {
                     0
@@ -708,7 +805,7 @@ impl<T: Real> Graph<T> {
                 p.resize(len, T::zero());
             }
         }
-        if matches!(pass, Pass::Forward { sinks: true }) {
+        if pass.forward_sinks() {
             // Scatter outputs start at zero (chunk 0 writes into them).
             for ins in &ex.instrs[reg.instrs.clone()] {
                 if let Out::Scatter(_, a) = ins.out {
@@ -719,6 +816,16 @@ impl<T: Real> Graph<T> {
         }
         ex.partials.clear();
         ex.partials.resize(tiles * reg.sums, 0.0);
+        if backward {
+            ex.overwrite_flags(&self.nodes, &self.edges, &reg);
+            // A fresh gradient buffer that this pass does not write is zero.
+            for (a, &i) in ex.arrays[reg.arrays.clone()].iter().enumerate() {
+                if self.nodes[i as usize].fresh && !ex.touched[reg.slots + reg.bcasts.len() + a] {
+                    // SAFETY: no chunk runs yet.
+                    unsafe { ex.adjs[a].slice(0, ex.adjs[a].len) }.fill(T::zero());
+                }
+            }
+        }
         let ctx = Ctx {
             nodes: &self.nodes,
             edges: &self.edges,
@@ -728,6 +835,8 @@ impl<T: Real> Graph<T> {
             adjs: &ex.adjs,
             bcast_values: &ex.bcast_values,
             live: &ex.live,
+            overwrite: &ex.overwrite,
+            bcast_nodes: &ex.bcasts[reg.bcasts.clone()],
             partials: Ptr::of(&mut ex.partials),
             len: reg.len,
             tile_len,
@@ -738,6 +847,10 @@ impl<T: Real> Graph<T> {
         };
         if threads == 1 {
             ctx.run_chunk(&mut ex.chunks[0], 0, 0..tiles);
+        } else if rayon::current_num_threads() == 1 {
+            for (c, chunk) in ex.chunks[..threads].iter_mut().enumerate() {
+                ctx.run_chunk(chunk, c, tiles * c / threads..tiles * (c + 1) / threads);
+            }
         } else {
             ex.chunks[..threads].par_iter_mut().enumerate().for_each(|(c, chunk)| {
                 ctx.run_chunk(chunk, c, tiles * c / threads..tiles * (c + 1) / threads);
@@ -750,7 +863,8 @@ impl<T: Real> Graph<T> {
             } else {
                 ex.vals[target as usize]
             };
-            if dst.ptr.is_null() || scatter == backward {
+            let wanted = if scatter { pass.forward_sinks() } else { backward };
+            if dst.ptr.is_null() || !wanted {
                 continue;
             }
             // SAFETY: the chunks are done; `dst` is the only reference.
@@ -769,11 +883,14 @@ impl<T: Real> Graph<T> {
                         .iter()
                         .fold(T::zero(), |acc, c| acc + c.bcast_grads[b]);
                     let a = self.nodes[i].adjoint as usize;
-                    self.adjoints.bufs[a][0] = self.adjoints.bufs[a][0] + total;
+                    self.adjoints.bufs[a][0] += total;
                 }
             }
         }
-        if matches!(pass, Pass::Forward { sinks: true }) {
+        for &i in &ex.arrays[reg.arrays.clone()] {
+            self.nodes[i as usize].fresh = false;
+        }
+        if pass.forward_sinks() {
             let mut k = 0;
             for ins in &ex.instrs[reg.instrs.clone()] {
                 if let Out::Sum(p, a) = ins.out {
@@ -791,7 +908,7 @@ impl<T: Real> Graph<T> {
                 .iter()
                 .filter_map(|c| c.non_finite.clone())
                 .min_by_key(|nf| (nf.node, nf.index));
-            if self.non_finite.is_none() && !backward {
+            if self.non_finite.is_none() && pass.forward_sinks() {
                 for ins in &ex.instrs[reg.instrs.clone()] {
                     if let Out::Sum(_, a) = ins.out {
                         // SAFETY: the chunks are done.
@@ -810,8 +927,21 @@ impl<T: Real> Graph<T> {
 /// Which pass a region runs.
 #[derive(Clone, Copy, Debug)]
 enum Pass {
+    /// Values (and, with `sinks`, the sums and scatter-adds).
     Forward { sinks: bool },
+    /// Recompute the tile values, then the vector-Jacobian products.
     Backward,
+    /// Forward with sinks, then backward, tile by tile.
+    Fused,
+}
+
+impl Pass {
+    fn forward_sinks(self) -> bool {
+        matches!(self, Pass::Forward { sinks: true } | Pass::Fused)
+    }
+    fn backward(self) -> bool {
+        matches!(self, Pass::Backward | Pass::Fused)
+    }
 }
 
 /// What the chunks of one region run share (read-only, or written through
@@ -825,6 +955,10 @@ struct Ctx<'a, T: Real> {
     adjs: &'a [Ptr<T>],
     bcast_values: &'a [T],
     live: &'a [bool],
+    /// Per instruction, bit k: input k's contribution is the first to its
+    /// tile slot, so it overwrites (no zeroing of adjoint slots).
+    overwrite: &'a [u8],
+    bcast_nodes: &'a [u32],
     partials: Ptr<f64>,
     len: usize,
     tile_len: usize,
@@ -868,6 +1002,10 @@ impl<T: Real> Ctx<'_, T> {
                 }
                 Pass::Backward => {
                     self.forward_tile(&tile, false, true, &mut chunk.non_finite, t);
+                    self.backward_tile(&tile, &mut chunk.bcast_grads, &mut chunk.non_finite);
+                }
+                Pass::Fused => {
+                    self.forward_tile(&tile, true, false, &mut chunk.non_finite, t);
                     self.backward_tile(&tile, &mut chunk.bcast_grads, &mut chunk.non_finite);
                 }
             }
@@ -914,7 +1052,9 @@ impl<T: Real> Ctx<'_, T> {
     /// Forward over one tile. `recompute`: only the values that live in
     /// slots (the others are in buffers already), and no sinks.
     fn forward_tile(&self, tile: &Tile<'_, T>, sinks: bool, recompute: bool, nf: &mut Option<NonFinite>, t: usize) {
-        for ins in self.instrs {
+        // Gathers already run with an earlier one of their group.
+        let mut grouped = Grouped::default();
+        for (j, ins) in self.instrs.iter().enumerate() {
             let node = &self.nodes[ins.node as usize];
             let slot_out = matches!(ins.out, Out::Slot(_));
             match node.op {
@@ -933,21 +1073,11 @@ impl<T: Real> Ctx<'_, T> {
                         *nf = first_non_finite(y, ins.node, kind.name(), tile.t0, false);
                     }
                 }
-                Op::Gather => {
-                    if recompute && !slot_out {
+                Op::Gather { .. } => {
+                    if (recompute && !slot_out) || grouped.contains(&(j as u32)) {
                         continue;
                     }
-                    let Src::Array(s) = ins.ins[0] else { unreachable!() };
-                    // SAFETY: the source is complete and only read.
-                    let source = unsafe { self.vals[s as usize].slice(0, self.vals[s as usize].len) };
-                    let idx = self.value(tile, ins.ins[1]);
-                    let y = self.out_mut(tile, ins.out);
-                    for (y, &i) in y.iter_mut().zip(idx) {
-                        *y = source[index(i, source.len(), "gather")];
-                    }
-                    if self.check_finite && nf.is_none() {
-                        *nf = first_non_finite(y, ins.node, "gather", tile.t0, false);
-                    }
+                    self.gather_group(tile, j, recompute, nf, &mut grouped);
                 }
                 Op::Sum if sinks => {
                     let Out::Sum(k, _) = ins.out else { unreachable!() };
@@ -961,12 +1091,66 @@ impl<T: Real> Ctx<'_, T> {
                     let target = self.accumulator(tile, s, self.vals[a as usize]);
                     let x = self.value(tile, ins.ins[0]);
                     let idx = self.value(tile, ins.ins[1]);
-                    let len = target.len();
+                    check_indices(idx, target.len(), "scatter_add");
                     for (&x, &i) in x.iter().zip(idx) {
-                        target[index(i, len, "scatter_add")] += x;
+                        // SAFETY: checked above.
+                        unsafe { *target.get_unchecked_mut(i.to_index_unchecked()) += x };
                     }
                 }
                 _ => {}
+            }
+        }
+    }
+
+    /// Runs the gather at instruction `first` together with the later gathers
+    /// that read the same array at the same indices (the channels of a
+    /// texel), recording them in `grouped`. Their outputs are written early,
+    /// which is harmless: nothing reads them before their turn.
+    fn gather_group(
+        &self,
+        tile: &Tile<'_, T>,
+        first: usize,
+        recompute: bool,
+        nf: &mut Option<NonFinite>,
+        grouped: &mut Grouped,
+    ) {
+        let lead = &self.instrs[first];
+        let Src::Array(s) = lead.ins[0] else {
+            unreachable!("gather sources are arrays")
+        };
+        // SAFETY: the source is complete and only read.
+        let source = unsafe { self.vals[s as usize].slice(0, self.vals[s as usize].len) };
+        let idx = self.value(tile, lead.ins[1]);
+        let mut group: [(usize, usize, &mut [T]); GATHER_GROUP] = std::array::from_fn(|_| (1, 0, &mut [][..]));
+        let mut members = [0u32; GATHER_GROUP];
+        let mut count = 0;
+        for (j, ins) in self.instrs.iter().enumerate().skip(first) {
+            let Op::Gather { stride, offset } = self.nodes[ins.node as usize].op else {
+                continue;
+            };
+            let same = matches!(ins.ins[0], Src::Array(a) if a == s) && same_src(ins.ins[1], lead.ins[1]);
+            if !same || (recompute && !matches!(ins.out, Out::Slot(_))) {
+                continue;
+            }
+            let at = Strided::new(stride, offset, source.len());
+            check_indices(idx, at.count, "gather");
+            group[count] = (at.stride, at.offset, self.out_mut(tile, ins.out));
+            members[count] = j as u32;
+            count += 1;
+            if count == GATHER_GROUP {
+                break;
+            }
+        }
+        grouped.extend(&members[1..count]);
+        // SAFETY: indices checked above; every slice holds the tile's elements.
+        unsafe { T::gather_unchecked(source, idx, &mut group[..count]) };
+        if self.check_finite && nf.is_none() {
+            for (&j, (_, _, y)) in members.iter().zip(&group[..count]) {
+                let node = self.instrs[j as usize].node;
+                if let Some(found) = first_non_finite(y, node, "gather", tile.t0, false) {
+                    *nf = Some(found);
+                    break;
+                }
             }
         }
     }
@@ -998,10 +1182,9 @@ impl<T: Real> Ctx<'_, T> {
     /// Vector-Jacobian products over one tile, in reverse.
     fn backward_tile(&self, tile: &Tile<'_, T>, bcast_grads: &mut [T], nf: &mut Option<NonFinite>) {
         let tl = self.tile_len;
-        // SAFETY: this chunk's scratch.
-        unsafe { tile.adjs.slice(0, (self.slots + bcast_grads.len()) * tl) }.fill(T::zero());
-        for ins in self.instrs.iter().rev() {
+        for (j, ins) in self.instrs.iter().enumerate().rev() {
             let id = ins.node as usize;
+            let accumulate = |k: usize| self.overwrite[j] & (1 << k) == 0;
             if !self.live[id] {
                 continue;
             }
@@ -1014,8 +1197,10 @@ impl<T: Real> Ctx<'_, T> {
                     // SAFETY: the sum's adjoint exists (it is live) and is only read.
                     let seed = unsafe { self.adjs[a as usize].slice(0, 1) }[0];
                     if let Some(g) = self.adjoint(tile, ins.ins[0]) {
-                        for g in g.iter_mut() {
-                            *g = *g + seed;
+                        if accumulate(0) {
+                            g.iter_mut().for_each(|g| *g += seed);
+                        } else {
+                            g.fill(seed);
                         }
                     }
                 }
@@ -1024,9 +1209,12 @@ impl<T: Real> Ctx<'_, T> {
                     // SAFETY: as above.
                     let gy = unsafe { self.adjs[a as usize].slice(0, self.adjs[a as usize].len) };
                     let idx = self.value(tile, ins.ins[1]);
+                    check_indices(idx, gy.len(), "scatter_add");
                     if let Some(g) = self.adjoint(tile, ins.ins[0]) {
+                        let acc = if accumulate(0) { T::one() } else { T::zero() };
                         for (g, &i) in g.iter_mut().zip(idx) {
-                            *g = *g + gy[index(i, gy.len(), "scatter_add")];
+                            // SAFETY: checked above.
+                            *g = acc.mul_add(*g, unsafe { *gy.get_unchecked(i.to_index_unchecked()) });
                         }
                     }
                 }
@@ -1044,42 +1232,144 @@ impl<T: Real> Ctx<'_, T> {
                             continue;
                         }
                         if let Some(gx) = self.adjoint(tile, ins.ins[k]) {
-                            kind.backward(k, x, y, gy, gx, p);
+                            kind.backward(k, accumulate(k), x, y, gy, gx, p);
                             if self.check_finite && nf.is_none() {
                                 *nf = first_non_finite(gx, ins.node, kind.name(), tile.t0, true);
                             }
                         }
                     }
                 }
-                Op::Gather => {
-                    if !live_input(0) {
-                        continue;
-                    }
-                    let Src::Array(s) = ins.ins[0] else { unreachable!() };
-                    let Some(gy) = self.adjoint(tile, Self::out_src(ins.out)) else {
-                        continue;
-                    };
-                    let pos = self
-                        .shared
-                        .iter()
-                        .position(|&x| x == (s, false))
-                        .expect("gather sources are shared targets");
-                    let target = self.accumulator(tile, pos as u32, self.adjs[s as usize]);
-                    let idx = self.value(tile, ins.ins[1]);
-                    let len = target.len();
-                    for (&g, &i) in gy.iter().zip(idx) {
-                        let j = index(i, len, "gather");
-                        target[j] = target[j] + g;
-                    }
-                }
+                // Deferred: see below.
                 _ => {}
             }
         }
+        // Gathers scatter their adjoints last, all gathers from one array in
+        // one interleaved loop: the texels that neighbouring lookups read (RGB
+        // channels, bilinear corners) share cache lines.
+        for (pos, &(s, scatter)) in self.shared.iter().enumerate() {
+            if scatter || self.adjs[s as usize].ptr.is_null() {
+                continue;
+            }
+            let target = self.accumulator(tile, pos as u32, self.adjs[s as usize]);
+            let mut group: [(&[T], &[T], Strided); GATHER_GROUP] = [(&[], &[], Strided::UNIT); GATHER_GROUP];
+            let mut count = 0;
+            for ins in self.instrs {
+                let Op::Gather { stride, offset } = self.nodes[ins.node as usize].op else {
+                    continue;
+                };
+                if !matches!(ins.ins[0], Src::Array(a) if a == s) || !self.live[ins.node as usize] {
+                    continue;
+                }
+                let Some(gy) = self.adjoint(tile, Self::out_src(ins.out)) else {
+                    continue;
+                };
+                let idx = self.value(tile, ins.ins[1]);
+                let at = Strided::new(stride, offset, target.len());
+                check_indices(idx, at.count, "gather");
+                group[count] = (idx, gy, at);
+                count += 1;
+                if count == GATHER_GROUP {
+                    scatter_group(target, &group[..count], tile.n);
+                    count = 0;
+                }
+            }
+            scatter_group(target, &group[..count], tile.n);
+        }
         for (b, acc) in bcast_grads.iter_mut().enumerate() {
+            if !self.live[self.bcast_nodes[b] as usize] {
+                continue;
+            }
             // SAFETY: this chunk's scratch.
             let g = unsafe { tile.adjs.slice((self.slots + b) * tl, tile.n) };
-            *acc = *acc + sum(g);
+            *acc += sum(g);
         }
+    }
+}
+
+/// Instruction indices of gathers already run in a group (a few per tile).
+struct Grouped {
+    ids: [u32; 4 * GATHER_GROUP],
+    len: usize,
+}
+
+impl Default for Grouped {
+    fn default() -> Self {
+        Grouped {
+            ids: [0; 4 * GATHER_GROUP],
+            len: 0,
+        }
+    }
+}
+
+impl Grouped {
+    fn contains(&self, j: &u32) -> bool {
+        self.ids[..self.len].contains(j)
+    }
+    fn extend(&mut self, js: &[u32]) {
+        for &j in js {
+            // A full list only costs a gather run twice (same values).
+            if self.len < self.ids.len() {
+                self.ids[self.len] = j;
+                self.len += 1;
+            }
+        }
+    }
+}
+
+fn same_src(a: Src, b: Src) -> bool {
+    match (a, b) {
+        (Src::Slot(x), Src::Slot(y)) | (Src::Array(x), Src::Array(y)) | (Src::Bcast(x), Src::Bcast(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// Most gathers from one array run (forward) or scatter (backward) in one loop.
+const GATHER_GROUP: usize = 16;
+
+/// target[at(idx[i])] += g[i] for every (idx, g, at) of the group, element by element.
+#[inline]
+fn scatter_group<T: Real>(target: &mut [T], group: &[(&[T], &[T], Strided)], n: usize) {
+    for i in 0..n {
+        for &(idx, g, at) in group {
+            // SAFETY: every slice holds the tile's n elements; the indices
+            // were checked against the target's length.
+            unsafe { *target.get_unchecked_mut(at.index(*idx.get_unchecked(i))) += *g.get_unchecked(i) };
+        }
+    }
+}
+
+/// The element a gather index addresses: `index * stride + offset` (e.g. a
+/// channel of texel-major RGB data), and how many indices are valid.
+#[derive(Clone, Copy)]
+struct Strided {
+    stride: usize,
+    offset: usize,
+    count: usize,
+}
+
+impl Strided {
+    const UNIT: Strided = Strided {
+        stride: 1,
+        offset: 0,
+        count: 0,
+    };
+
+    fn new(stride: u32, offset: u32, len: usize) -> Self {
+        let (stride, offset) = (stride as usize, offset as usize);
+        let count = if len > offset {
+            (len - 1 - offset) / stride + 1
+        } else {
+            0
+        };
+        Strided { stride, offset, count }
+    }
+
+    /// The element of index `i`, which the caller checked against `count`.
+    #[inline(always)]
+    fn index<T: Real>(self, i: T) -> usize {
+        // SAFETY: the caller checked 0 <= i < count <= 2^24.
+        let i = unsafe { i.to_index_unchecked() };
+        i * self.stride + self.offset
     }
 }
 
@@ -1093,14 +1383,21 @@ struct Tile<'p, T> {
     chunk: usize,
 }
 
-/// An index carried as a float, checked against the target's length.
-#[inline(always)]
-fn index<T: Real>(i: T, len: usize, op: &str) -> usize {
-    let j = i.to_usize().unwrap_or(usize::MAX);
-    if j >= len {
-        panic!("{op}: index {i} out of range for an array of {len} elements");
+/// Checks that every index of a tile (floats holding integers) addresses an
+/// array of `len` elements, in one vectorised pass, so that the gather or
+/// scatter loop after it indexes unchecked.
+#[inline]
+fn check_indices<T: Real>(idx: &[T], len: usize, op: &str) {
+    let hi = T::c(len as f64);
+    let ok = idx.iter().fold(true, |ok, &i| ok & (i >= T::zero()) & (i < hi));
+    if !ok {
+        let bad = idx
+            .iter()
+            .find(|&&i| !(i >= T::zero() && i < hi))
+            .copied()
+            .unwrap_or(T::nan());
+        panic!("{op}: index {bad} out of range for an array of {len} elements");
     }
-    j
 }
 
 /// Sum with 16 independent accumulators (vectorises; exact order is fixed).
@@ -1111,12 +1408,12 @@ pub(crate) fn sum<T: Real>(x: &[T]) -> T {
     let rest = chunks.remainder();
     for c in chunks {
         for (a, &v) in acc.iter_mut().zip(c) {
-            *a = *a + v;
+            *a += v;
         }
     }
     let mut s = rest.iter().fold(T::zero(), |s, &v| s + v);
     for a in acc {
-        s = s + a;
+        s += a;
     }
     s
 }
@@ -1125,7 +1422,7 @@ pub(crate) fn sum<T: Real>(x: &[T]) -> T {
 #[inline]
 pub(crate) fn add_into<T: Real>(dst: &mut [T], src: &[T]) {
     for (d, &s) in dst.iter_mut().zip(src) {
-        *d = *d + s;
+        *d += s;
     }
 }
 

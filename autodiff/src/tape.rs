@@ -29,8 +29,8 @@ pub(crate) enum Op<T> {
     Sum,
     /// out[idx[i]] += x[i]; inputs (x, idx); the node's length is the output's.
     ScatterAdd,
-    /// y[i] = source[idx[i]]; inputs (source, idx).
-    Gather,
+    /// y[i] = source[idx[i] * stride + offset]; inputs (source, idx).
+    Gather { stride: u32, offset: u32 },
     /// A contiguous part of the input starting at the given element.
     Slice(u32),
     /// Inputs laid end to end.
@@ -48,7 +48,7 @@ impl<T> Op<T> {
             Op::Map(kind, _) => kind.name(),
             Op::Sum => "sum",
             Op::ScatterAdd => "scatter_add",
-            Op::Gather => "gather",
+            Op::Gather { .. } => "gather",
             Op::Slice(_) => "slice",
             Op::Concat => "concat",
             Op::Custom(_) => "custom",
@@ -74,6 +74,8 @@ pub(crate) struct Node<T> {
     pub slot: u32,
     /// Planning flag: the value must be written to a buffer.
     pub materialize: bool,
+    /// During a region's backward pass: the adjoint buffer holds nothing yet.
+    pub fresh: bool,
 }
 
 /// A growable set of reusable buffers: `reset` returns them all, and the next
@@ -284,10 +286,11 @@ impl<T: Real> Tape<T> {
 
     fn input(&self, values: &[T], op: Op<T>) -> Var<'_, T> {
         assert!(!values.is_empty(), "{}: an array needs at least one element", op.name());
-        let mut g = self.graph.borrow_mut();
+        let mut g = self.graph_mut(op.name());
         let buf = g.values.take(values.len());
         g.values.bufs[buf as usize].copy_from_slice(values);
-        let id = g.push(op, values.len(), &[], matches!(op, Op::Leaf));
+        let first = g.edges.len();
+        let id = g.push_node(op, values.len(), first, matches!(op, Op::Leaf));
         g.nodes[id as usize].value = buf;
         // Inputs need no execution: keep them out of the planner's way.
         if g.executed == id as usize {
@@ -340,8 +343,17 @@ impl<T: Real> Tape<T> {
     }
 
     /// The node's values (computed now if pending).
+    ///
+    /// The returned guard borrows the tape: copy what you need (`to_vec`, `[0]`)
+    /// before recording or computing more.
     pub fn value(&self, var: Var<'_, T>) -> Ref<'_, [T]> {
-        self.graph.borrow_mut().execute(Some(var.id));
+        let ready = {
+            let g = self.graph.borrow();
+            (var.id as usize) < g.executed && g.nodes[var.id as usize].value != NONE
+        };
+        if !ready {
+            self.graph_mut("value").execute(Some(var.id));
+        }
         Ref::map(self.graph.borrow(), |g| {
             let n = &g.nodes[var.id as usize];
             &g.values.bufs[n.value as usize][..n.len as usize]
@@ -349,19 +361,32 @@ impl<T: Real> Tape<T> {
     }
 
     /// Gradient of the last [`backward`](Self::backward)'s output with
-    /// respect to `var` (zeros where it does not depend on `var`).
+    /// respect to `var`: every leaf has one (zeros where the output does not
+    /// depend on it); a computed node has one if it was kept in a buffer.
     pub fn grad(&self, var: Var<'_, T>) -> Ref<'_, [T]> {
-        {
-            let mut g = self.graph.borrow_mut();
-            let len = g.nodes[var.id as usize].len as usize;
-            if g.nodes[var.id as usize].adjoint == NONE {
-                let a = g.adjoints.take_zeroed(len);
-                g.nodes[var.id as usize].adjoint = a;
-            }
-        }
-        Ref::map(self.graph.borrow(), |g| {
+        let g = self.graph.borrow();
+        let n = &g.nodes[var.id as usize];
+        assert!(
+            n.adjoint != NONE,
+            "grad: node {} (`{}`) has no gradient: call backward first; gradients of \
+             intermediate values are not kept unless they are read elsewhere (make it a leaf)",
+            var.id,
+            n.op.name()
+        );
+        Ref::map(g, |g| {
             let n = &g.nodes[var.id as usize];
             &g.adjoints.bufs[n.adjoint as usize][..n.len as usize]
+        })
+    }
+
+    /// Mutable access to the graph, with a clear message when a value or
+    /// gradient guard is still alive.
+    fn graph_mut(&self, what: &str) -> std::cell::RefMut<'_, Graph<T>> {
+        self.graph.try_borrow_mut().unwrap_or_else(|_| {
+            panic!(
+                "{what}: the tape is borrowed by a value or gradient still in use; \
+                 copy what you need (`.to_vec()`, `[i]`) before computing more"
+            )
         })
     }
 
@@ -369,7 +394,7 @@ impl<T: Real> Tape<T> {
     /// node that needs one. Each call starts afresh, so several backward
     /// passes after one forward give the gradients of several outputs.
     pub fn backward(&self, output: Var<'_, T>) {
-        let mut g = self.graph.borrow_mut();
+        let mut g = self.graph_mut("backward");
         let len = g.nodes[output.id as usize].len;
         assert_eq!(len, 1, "backward: the output must have one element, it has {len}");
         g.backward(output.id);
@@ -407,22 +432,31 @@ impl<T: Real> Tape<T> {
 
     /// Records a node; shapes are checked by the caller.
     pub(crate) fn record(&self, op: Op<T>, len: usize, inputs: &[u32]) -> Var<'_, T> {
-        let mut g = self.graph.borrow_mut();
+        self.record_iter(op, len, inputs.iter().copied())
+    }
+
+    /// [`record`](Self::record) for inputs given by an iterator (no
+    /// temporary list to allocate).
+    pub(crate) fn record_iter(&self, op: Op<T>, len: usize, inputs: impl Iterator<Item = u32>) -> Var<'_, T> {
+        let mut g = self.graph_mut(op.name());
         let differentiable = match op {
             Op::Map(kind, _) => kind.differentiable(),
-            Op::Leaf => true,
             Op::Constant => false,
             _ => true,
         };
-        let requires_grad = differentiable && inputs.iter().any(|&i| g.nodes[i as usize].requires_grad);
-        let id = g.push(op, len, inputs, requires_grad);
+        let first = g.edges.len();
+        g.edges.extend(inputs);
+        let requires_grad = differentiable && g.edges[first..].iter().any(|&i| g.nodes[i as usize].requires_grad);
+        let id = g.push_node(op, len, first, requires_grad);
         Var { tape: self, id }
     }
 
     /// Records a node whose gradient is cut (stop_gradient).
     pub(crate) fn record_detached(&self, op: Op<T>, len: usize, inputs: &[u32]) -> Var<'_, T> {
-        let mut g = self.graph.borrow_mut();
-        let id = g.push(op, len, inputs, false);
+        let mut g = self.graph_mut(op.name());
+        let first = g.edges.len();
+        g.edges.extend_from_slice(inputs);
+        let id = g.push_node(op, len, first, false);
         Var { tape: self, id }
     }
 
@@ -433,7 +467,8 @@ impl<T: Real> Tape<T> {
 }
 
 impl<T: Real> Graph<T> {
-    fn push(&mut self, op: Op<T>, len: usize, inputs: &[u32], requires_grad: bool) -> u32 {
+    /// Appends a node whose inputs are the edges from `first_input` to the end.
+    fn push_node(&mut self, op: Op<T>, len: usize, first_input: usize, requires_grad: bool) -> u32 {
         assert!(
             len < NONE as usize,
             "{}: {len} elements exceed the tape's index range",
@@ -443,16 +478,16 @@ impl<T: Real> Graph<T> {
         self.nodes.push(Node {
             op,
             len: len as u32,
-            first_input: self.edges.len() as u32,
-            num_inputs: inputs.len() as u32,
+            first_input: first_input as u32,
+            num_inputs: (self.edges.len() - first_input) as u32,
             requires_grad,
             value: NONE,
             adjoint: NONE,
             step: NONE,
             slot: NONE,
             materialize: false,
+            fresh: false,
         });
-        self.edges.extend_from_slice(inputs);
         id
     }
 

@@ -30,24 +30,6 @@ impl<'t, T: Real> Vec3<'t, T> {
         }
     }
 
-    /// Componentwise sum.
-    pub fn add(self, o: Self) -> Self {
-        Vec3 {
-            x: self.x + o.x,
-            y: self.y + o.y,
-            z: self.z + o.z,
-        }
-    }
-
-    /// Componentwise difference.
-    pub fn sub(self, o: Self) -> Self {
-        Vec3 {
-            x: self.x - o.x,
-            y: self.y - o.y,
-            z: self.z - o.z,
-        }
-    }
-
     /// Every vector times the scalar field `s`.
     pub fn scale(self, s: Var<'t, T>) -> Self {
         Vec3 {
@@ -107,6 +89,42 @@ impl<'t, T: Real> Vec3<'t, T> {
     }
 }
 
+impl<'t, T: Real> std::ops::Add for Vec3<'t, T> {
+    type Output = Self;
+    /// Componentwise sum.
+    fn add(self, o: Self) -> Self {
+        Vec3 {
+            x: self.x + o.x,
+            y: self.y + o.y,
+            z: self.z + o.z,
+        }
+    }
+}
+
+impl<'t, T: Real> std::ops::Sub for Vec3<'t, T> {
+    type Output = Self;
+    /// Componentwise difference.
+    fn sub(self, o: Self) -> Self {
+        Vec3 {
+            x: self.x - o.x,
+            y: self.y - o.y,
+            z: self.z - o.z,
+        }
+    }
+}
+
+impl<'t, T: Real> std::ops::Neg for Vec3<'t, T> {
+    type Output = Self;
+    /// Componentwise negation.
+    fn neg(self) -> Self {
+        Vec3 {
+            x: -self.x,
+            y: -self.y,
+            z: -self.z,
+        }
+    }
+}
+
 /// A rotation as a unit quaternion `w + xi + yj + zk` (length-1 arrays for a
 /// single pose, or per-element fields).
 #[derive(Clone, Copy, Debug)]
@@ -145,6 +163,6 @@ impl<'t, T: Real> Quat<'t, T> {
             y: t.y * T::c(2.0),
             z: t.z * T::c(2.0),
         };
-        t.scale_add(self.w, p).add(self.v.cross(t))
+        t.scale_add(self.w, p) + self.v.cross(t)
     }
 }

@@ -59,12 +59,13 @@ macro_rules! map_ops {
             pub(crate) fn forward<T: Real>(self, x: [&[T]; 3], y: &mut [T], p: [T; 2]) {
                 match self { $(MapKind::$name => forward::<T, $name>(x, y, p)),* }
             }
-            /// gx += gy * dy/dx_k over a tile.
+            /// gx += gy * dy/dx_k over a tile (gx = ... when `accumulate` is false).
             #[inline]
+            #[allow(clippy::too_many_arguments)]
             pub(crate) fn backward<T: Real>(
-                self, k: usize, x: [&[T]; 3], y: &[T], gy: &[T], gx: &mut [T], p: [T; 2],
+                self, k: usize, accumulate: bool, x: [&[T]; 3], y: &[T], gy: &[T], gx: &mut [T], p: [T; 2],
             ) {
-                match self { $(MapKind::$name => backward::<T, $name>(k, x, y, gy, gx, p)),* }
+                match self { $(MapKind::$name => backward::<T, $name>(k, accumulate, x, y, gy, gx, p)),* }
             }
         }
     };
@@ -296,39 +297,58 @@ pub(crate) fn forward<T: Real, F: MapOp<T>>(x: [&[T]; 3], y: &mut [T], p: [T; 2]
     }
 }
 
-/// gx += gy * dy/dx_K over a tile (the vector-Jacobian product for input K).
+/// gx += gy * dy/dx_K over a tile (the vector-Jacobian product for input K);
+/// without ACC the first contribution overwrites, which spares zeroing.
 #[inline(always)]
-fn backward_input<T: Real, F: MapOp<T>, const K: usize>(x: [&[T]; 3], y: &[T], gy: &[T], gx: &mut [T], p: [T; 2]) {
+fn backward_input<T: Real, F: MapOp<T>, const K: usize, const ACC: bool>(
+    x: [&[T]; 3],
+    y: &[T],
+    gy: &[T],
+    gx: &mut [T],
+    p: [T; 2],
+) {
     let n = gx.len();
     let (y, gy) = (&y[..n], &gy[..n]);
     let z = T::zero();
+    let put = |g: &mut T, gy: T, d: T| *g = if ACC { gy.mul_add(d, *g) } else { gy * d };
     match F::ARITY {
         1 => {
             for (((g, &a), &y), &gy) in gx.iter_mut().zip(&x[0][..n]).zip(y).zip(gy) {
-                *g = gy.mul_add(F::df([a, z, z], y, p)[K], *g);
+                put(g, gy, F::df([a, z, z], y, p)[K]);
             }
         }
         2 => {
             let ab = x[0][..n].iter().zip(&x[1][..n]);
             for (((g, (&a, &b)), &y), &gy) in gx.iter_mut().zip(ab).zip(y).zip(gy) {
-                *g = gy.mul_add(F::df([a, b, z], y, p)[K], *g);
+                put(g, gy, F::df([a, b, z], y, p)[K]);
             }
         }
         _ => {
             let abc = x[0][..n].iter().zip(&x[1][..n]).zip(&x[2][..n]);
             for (((g, ((&a, &b), &c)), &y), &gy) in gx.iter_mut().zip(abc).zip(y).zip(gy) {
-                *g = gy.mul_add(F::df([a, b, c], y, p)[K], *g);
+                put(g, gy, F::df([a, b, c], y, p)[K]);
             }
         }
     }
 }
 
-/// gx += gy * dy/dx_k over a tile.
+/// gx (+)= gy * dy/dx_k over a tile.
 #[inline(always)]
-pub(crate) fn backward<T: Real, F: MapOp<T>>(k: usize, x: [&[T]; 3], y: &[T], gy: &[T], gx: &mut [T], p: [T; 2]) {
-    match k {
-        0 => backward_input::<T, F, 0>(x, y, gy, gx, p),
-        1 => backward_input::<T, F, 1>(x, y, gy, gx, p),
-        _ => backward_input::<T, F, 2>(x, y, gy, gx, p),
+pub(crate) fn backward<T: Real, F: MapOp<T>>(
+    k: usize,
+    accumulate: bool,
+    x: [&[T]; 3],
+    y: &[T],
+    gy: &[T],
+    gx: &mut [T],
+    p: [T; 2],
+) {
+    match (k, accumulate) {
+        (0, true) => backward_input::<T, F, 0, true>(x, y, gy, gx, p),
+        (0, false) => backward_input::<T, F, 0, false>(x, y, gy, gx, p),
+        (1, true) => backward_input::<T, F, 1, true>(x, y, gy, gx, p),
+        (1, false) => backward_input::<T, F, 1, false>(x, y, gy, gx, p),
+        (_, true) => backward_input::<T, F, 2, true>(x, y, gy, gx, p),
+        (_, false) => backward_input::<T, F, 2, false>(x, y, gy, gx, p),
     }
 }

@@ -32,13 +32,11 @@ impl<T: Real> Tape<T> {
     /// The arrays laid end to end.
     pub fn concat<'t>(&'t self, parts: &[Var<'t, T>]) -> Var<'t, T> {
         assert!(!parts.is_empty(), "concat: nothing to concatenate");
-        let mut ids = Vec::with_capacity(parts.len());
         let mut len = 0;
         for p in parts {
             assert!(std::ptr::eq(p.tape, self), "concat: operands live on different tapes");
-            ids.push(p.id);
             len += p.len();
         }
-        self.record(Op::Concat, len, &ids)
+        self.record_iter(Op::Concat, len, parts.iter().map(|p| p.id))
     }
 }

@@ -46,20 +46,84 @@ macro_rules! unary_case {
 
 use std::f64::consts::{E, FRAC_PI_2, FRAC_PI_4, PI};
 
-unary_case!(sqrt_op, sqrt, [(4.0, 2.0), (2.0, std::f64::consts::SQRT_2), (0.0, 0.0)], 0.1, 9.0);
+unary_case!(
+    sqrt_op,
+    sqrt,
+    [(4.0, 2.0), (2.0, std::f64::consts::SQRT_2), (0.0, 0.0)],
+    0.1,
+    9.0
+);
 unary_case!(rsqrt_op, rsqrt, [(4.0, 0.5), (0.25, 2.0)], 0.1, 9.0);
 unary_case!(exp_op, exp, [(0.0, 1.0), (1.0, E), (-2.0, (-2f64).exp())], -5.0, 5.0);
-unary_case!(ln_op, ln, [(1.0, 0.0), (E, 1.0), (0.5, -std::f64::consts::LN_2)], 0.05, 20.0);
-unary_case!(sin_op, sin, [(0.0, 0.0), (FRAC_PI_2, 1.0), (-FRAC_PI_4, -std::f64::consts::FRAC_1_SQRT_2)], -9.0, 9.0);
-unary_case!(cos_op, cos, [(0.0, 1.0), (PI, -1.0), (FRAC_PI_4, std::f64::consts::FRAC_1_SQRT_2)], -9.0, 9.0);
-unary_case!(asin_op, asin, [(0.0, 0.0), (1.0, FRAC_PI_2), (-0.5, -PI / 6.0)], -0.95, 0.95);
-unary_case!(acos_op, acos, [(1.0, 0.0), (0.0, FRAC_PI_2), (-1.0, PI), (0.5, PI / 3.0)], -0.95, 0.95);
+unary_case!(
+    ln_op,
+    ln,
+    [(1.0, 0.0), (E, 1.0), (0.5, -std::f64::consts::LN_2)],
+    0.05,
+    20.0
+);
+unary_case!(
+    sin_op,
+    sin,
+    [
+        (0.0, 0.0),
+        (FRAC_PI_2, 1.0),
+        (-FRAC_PI_4, -std::f64::consts::FRAC_1_SQRT_2)
+    ],
+    -9.0,
+    9.0
+);
+unary_case!(
+    cos_op,
+    cos,
+    [(0.0, 1.0), (PI, -1.0), (FRAC_PI_4, std::f64::consts::FRAC_1_SQRT_2)],
+    -9.0,
+    9.0
+);
+unary_case!(
+    asin_op,
+    asin,
+    [(0.0, 0.0), (1.0, FRAC_PI_2), (-0.5, -PI / 6.0)],
+    -0.95,
+    0.95
+);
+unary_case!(
+    acos_op,
+    acos,
+    [(1.0, 0.0), (0.0, FRAC_PI_2), (-1.0, PI), (0.5, PI / 3.0)],
+    -0.95,
+    0.95
+);
 unary_case!(abs_op, abs, [(-2.5, 2.5), (3.0, 3.0), (0.0, 0.0)], 0.1, 3.0);
-unary_case!(sigmoid_op, sigmoid, [(0.0, 0.5), (2.0, 1.0 / (1.0 + (-2f64).exp())), (-200.0, 0.0)], -6.0, 6.0);
-unary_case!(softplus_op, softplus, [(0.0, std::f64::consts::LN_2), (50.0, 50.0), (-30.0, (-30f64).exp())], -8.0, 8.0);
+unary_case!(
+    sigmoid_op,
+    sigmoid,
+    [(0.0, 0.5), (2.0, 1.0 / (1.0 + (-2f64).exp())), (-200.0, 0.0)],
+    -6.0,
+    6.0
+);
+unary_case!(
+    softplus_op,
+    softplus,
+    [(0.0, std::f64::consts::LN_2), (50.0, 50.0), (-30.0, (-30f64).exp())],
+    -8.0,
+    8.0
+);
 unary_case!(powf_op, powf(2.5), [(4.0, 32.0), (0.0, 0.0), (1.0, 1.0)], 0.1, 4.0);
-unary_case!(powf_integer_negative_base, powf(3.0), [(-2.0, -8.0), (2.0, 8.0)], -3.0, 3.0);
-unary_case!(clamp_op, clamp(-1.0, 2.0), [(-3.0, -1.0), (0.5, 0.5), (7.0, 2.0)], -0.9, 1.9);
+unary_case!(
+    powf_integer_negative_base,
+    powf(3.0),
+    [(-2.0, -8.0), (2.0, 8.0)],
+    -3.0,
+    3.0
+);
+unary_case!(
+    clamp_op,
+    clamp(-1.0, 2.0),
+    [(-3.0, -1.0), (0.5, 0.5), (7.0, 2.0)],
+    -0.9,
+    1.9
+);
 unary_case!(huber_op, huber(1.0), [(0.5, 0.125), (-3.0, 2.5), (2.0, 1.5)], -3.0, 3.0);
 unary_case!(affine_op, affine(2.0, -1.0), [(3.0, 5.0), (0.0, -1.0)], -3.0, 3.0);
 unary_case!(neg_and_square, square, [(-3.0, 9.0), (0.5, 0.25)], -3.0, 3.0);
@@ -88,7 +152,10 @@ fn floor_and_comparisons_give_values_and_no_gradient() {
 }
 
 fn two_inputs() -> [Input; 2] {
-    [Input::Var(uniform(12, 0.2, 3.0, 1)), Input::Var(uniform(12, -2.0, 2.0, 2))]
+    [
+        Input::Var(uniform(12, 0.2, 3.0, 1)),
+        Input::Var(uniform(12, -2.0, 2.0, 2)),
+    ]
 }
 
 macro_rules! binary_case {
@@ -145,8 +212,16 @@ binary_case!(add_op, add, [(1.0, 2.0, 3.0), (-1.5, 0.5, -1.0)]);
 binary_case!(sub_op, sub, [(1.0, 2.0, -1.0), (-1.5, 0.5, -2.0)]);
 binary_case!(mul_op, mul, [(3.0, 2.0, 6.0), (-1.5, 0.5, -0.75)]);
 binary_case!(div_op, div, [(1.5, 6.0, 3.0), (0.0, -1.0, -2.0)]);
-binary_case!(pow_op, pow, [(2.0, 3.0, 8.0), (4.0, 0.5, 2.0), (0.0, 2.0, 0.0), (0.0, 0.0, 1.0)]);
-binary_case!(atan2_op, atan2, [(2.1, 1.0, FRAC_PI_4), (0.1, 0.0, PI), (1.1, -1.0, -FRAC_PI_2)]);
+binary_case!(
+    pow_op,
+    pow,
+    [(2.0, 3.0, 8.0), (4.0, 0.5, 2.0), (0.0, 2.0, 0.0), (0.0, 0.0, 1.0)]
+);
+binary_case!(
+    atan2_op,
+    atan2,
+    [(2.1, 1.0, FRAC_PI_4), (0.1, 0.0, PI), (1.1, -1.0, -FRAC_PI_2)]
+);
 binary_case!(min_op, min, [(1.0, 2.0, 1.0), (3.0, -1.0, -1.0)]);
 binary_case!(max_op, max, [(1.0, 2.0, 2.0), (3.0, -1.0, 3.0)]);
 
@@ -163,11 +238,19 @@ fn min_max_split_the_gradient_on_ties_and_follow_the_winner() {
 #[test]
 fn mul_add_and_select() {
     let tape = Tape::<f64>::new();
-    let (a, b, c) = (tape.constant(&[2.0, -1.0]), tape.constant(&[3.0, 4.0]), tape.constant(&[1.0, 0.5]));
+    let (a, b, c) = (
+        tape.constant(&[2.0, -1.0]),
+        tape.constant(&[3.0, 4.0]),
+        tape.constant(&[1.0, 0.5]),
+    );
     assert_eq!(&*tape.value(a.mul_add(b, c)), &[7.0, -3.5]);
     let mask = tape.constant(&[1.0, 0.0]);
     assert_eq!(&*tape.value(mask.select(a, b)), &[2.0, 4.0]);
-    let inputs = [Input::Var(uniform(8, -2.0, 2.0, 5)), Input::Var(uniform(8, -2.0, 2.0, 6)), Input::Var(uniform(8, -2.0, 2.0, 8))];
+    let inputs = [
+        Input::Var(uniform(8, -2.0, 2.0, 5)),
+        Input::Var(uniform(8, -2.0, 2.0, 6)),
+        Input::Var(uniform(8, -2.0, 2.0, 8)),
+    ];
     let r = gradcheck(&inputs, |_, x| x[0].mul_add(x[1], x[2]));
     assert!(r.worst_rel_error < TOL, "mul_add: {r}");
     let r = gradcheck(&inputs, |_, x| x[0].gt(x[1]).select(x[1] * x[2], x[2].exp()));
@@ -198,9 +281,13 @@ fn gather_scatter_add_segmented_sum() {
     let seg = tape.constant(&[0.0, 0.0, 1.0, 1.0]);
     assert_eq!(&*tape.value(vals.segmented_sum(seg, 2)), &[3.0, 7.0]);
     let idx = Input::Const(vec![2.0, 0.0, 2.0, 1.0, 4.0, 4.0, 3.0]);
-    let r = gradcheck(&[Input::Var(uniform(5, -1.0, 1.0, 10)), idx.clone()], |_, x| x[0].gather(x[1]).exp());
+    let r = gradcheck(&[Input::Var(uniform(5, -1.0, 1.0, 10)), idx.clone()], |_, x| {
+        x[0].gather(x[1]).exp()
+    });
     assert!(r.worst_rel_error < TOL, "gather: {r}");
-    let r = gradcheck(&[Input::Var(uniform(7, -1.0, 1.0, 11)), idx], |_, x| x[0].scatter_add(x[1], 6).sin());
+    let r = gradcheck(&[Input::Var(uniform(7, -1.0, 1.0, 11)), idx], |_, x| {
+        x[0].scatter_add(x[1], 6).sin()
+    });
     assert!(r.worst_rel_error < TOL, "scatter_add: {r}");
 }
 
@@ -217,7 +304,10 @@ fn slice_concat_stop_gradient() {
     let tape = Tape::<f64>::new();
     let x = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
     assert_eq!(&*tape.value(x.slice(1, 2)), &[2.0, 3.0]);
-    assert_eq!(&*tape.value(tape.concat(&[x.slice(2, 2), x.slice(0, 1)])), &[3.0, 4.0, 1.0]);
+    assert_eq!(
+        &*tape.value(tape.concat(&[x.slice(2, 2), x.slice(0, 1)])),
+        &[3.0, 4.0, 1.0]
+    );
     let r = gradcheck(&[Input::Var(uniform(6, -1.0, 1.0, 12))], |t, x| {
         let a = x[0].slice(1, 3).exp();
         let b = x[0].slice(0, 2) * 3.0;
@@ -245,4 +335,31 @@ fn scalars_on_the_left() {
     assert_eq!(&*tape.value(8.0 / x), &[4.0, 2.0]);
     assert_eq!(&*tape.value(3.0 * x + 1.0), &[7.0, 13.0]);
     assert_eq!(&*tape.value(-x), &[-2.0, -4.0]);
+}
+
+#[test]
+fn gather_channel_reads_interleaved_data() {
+    let tape = Tape::<f64>::new();
+    let rgb = tape.constant(&[1.0, 2.0, 3.0, 10.0, 20.0, 30.0]);
+    let texel = tape.constant(&[1.0, 0.0, 1.0]);
+    assert_eq!(&*tape.value(rgb.gather_channel(texel, 3, 2)), &[30.0, 3.0, 30.0]);
+    assert_eq!(&*tape.value(rgb.gather_channel(texel, 3, 0)), &[10.0, 1.0, 10.0]);
+    let texel = Input::Const(vec![1.0, 0.0, 3.0, 3.0, 2.0]);
+    let r = gradcheck(&[Input::Var(uniform(12, -1.0, 1.0, 13)), texel], |_, x| {
+        let (r, g, b) = (
+            x[0].gather_channel(x[1], 3, 0),
+            x[0].gather_channel(x[1], 3, 1),
+            x[0].gather_channel(x[1], 3, 2),
+        );
+        (r * g).exp() + b.sin()
+    });
+    assert!(r.worst_rel_error < TOL, "gather_channel: {r}");
+}
+
+#[test]
+#[should_panic(expected = "gather: index 2 out of range for an array of 2 elements")]
+fn gather_channel_checks_the_texel_range() {
+    let tape = Tape::<f32>::new();
+    let rgb = tape.constant(&[1.0, 2.0, 3.0, 10.0, 20.0, 30.0]);
+    let _ = tape.value(rgb.gather_channel(tape.constant(&[2.0]), 3, 0));
 }

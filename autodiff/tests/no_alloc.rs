@@ -1,0 +1,60 @@
+//! Steady-state iterations allocate nothing: every buffer of the tape is
+//! reused after `reset_to`. A counting global allocator watches this test
+//! binary alone.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use autodiff::{Tape, Vec3};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn iterations_after_the_first_allocate_nothing() {
+    // One thread: rayon's job queue is not ours to count.
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
+    pool.install(|| {
+        let n = 40_000;
+        let mut tape = Tape::<f32>::new();
+        let x = tape.leaf(&vec![0.25f32; n]).id();
+        let table = tape.leaf(&[0.5f32; 300]).id();
+        let idx: Vec<f32> = (0..n).map(|i| (i % 100) as f32).collect();
+        let idx = tape.constant(&idx).id();
+        let mark = tape.mark();
+        let mut counts = Vec::new();
+        for _ in 0..4 {
+            let before = ALLOCATIONS.load(Ordering::Relaxed);
+            tape.reset_to(mark);
+            let (x, table, idx) = (tape.var(x), tape.var(table), tape.var(idx));
+            let v = Vec3::new(x, x.sin(), x.exp()).normalize(1e-6);
+            let lit = table.gather_channel(idx, 3, 1) * v.y + v.z.slice(0, n).sqrt();
+            let loss = lit.segmented_sum(idx, 100).abs().sum() + tape.concat(&[x, x]).mean();
+            tape.backward(loss);
+            let _ = tape.grad(table)[0] + tape.value(loss)[0];
+            counts.push(ALLOCATIONS.load(Ordering::Relaxed) - before);
+        }
+        assert!(
+            counts[1..].iter().all(|&c| c == 0),
+            "allocations per iteration: {counts:?}"
+        );
+    });
+}

@@ -1,0 +1,44 @@
+//! Warps from the unit square to the disk, the hemisphere and the sphere, with their pdfs
+//! (pbrt-v4, section A.5 "Sampling Multidimensional Functions").
+
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_4, PI};
+
+use glam::{Vec2, Vec3};
+
+/// Shirley-Chiu concentric map of [0, 1)^2 onto the unit disk (area preserving, low distortion).
+pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o == Vec2::ZERO {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (o.y, 0.5 * PI - FRAC_PI_4 * (o.x / o.y))
+    };
+    r * Vec2::new(theta.cos(), theta.sin())
+}
+
+/// Cosine-weighted direction on the +Z hemisphere (Malley's method: lift a uniform disk point).
+pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = sample_concentric_disk(u);
+    Vec3::new(d.x, d.y, (1.0 - d.length_squared()).max(0.0).sqrt())
+}
+
+/// Solid-angle pdf of [`sample_cosine_hemisphere`]: cos(theta) / pi above the horizon, else 0.
+pub fn cosine_hemisphere_pdf(w: Vec3) -> f32 {
+    w.z.max(0.0) * FRAC_1_PI
+}
+
+/// Uniform direction on the unit sphere (z uniform in [-1, 1], Archimedes).
+pub fn sample_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let (sin_phi, cos_phi) = (2.0 * PI * u.y).sin_cos();
+    Vec3::new(r * cos_phi, r * sin_phi, z)
+}
+
+/// Solid-angle pdf of [`sample_uniform_sphere`]: 1 / (4 pi).
+pub fn uniform_sphere_pdf() -> f32 {
+    0.25 * FRAC_1_PI
+}
