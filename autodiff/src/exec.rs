@@ -1329,11 +1329,48 @@ const GATHER_GROUP: usize = 16;
 /// target[at(idx[i])] += g[i] for every (idx, g, at) of the group, element by element.
 #[inline]
 fn scatter_group<T: Real>(target: &mut [T], group: &[(&[T], &[T], Strided)], n: usize) {
+    let Some(&(idx0, _, at0)) = group.first() else { return };
+    // Channels of one texel: one index conversion per element, and for the
+    // usual channel counts a loop the compiler unrolls over the group.
+    if group
+        .iter()
+        .all(|&(idx, _, at)| std::ptr::eq(idx, idx0) && at.stride == at0.stride)
+    {
+        match group.len() {
+            1 => return scatter_channels::<T, 1>(target, idx0, at0.stride, group, n),
+            2 => return scatter_channels::<T, 2>(target, idx0, at0.stride, group, n),
+            3 => return scatter_channels::<T, 3>(target, idx0, at0.stride, group, n),
+            4 => return scatter_channels::<T, 4>(target, idx0, at0.stride, group, n),
+            _ => {}
+        }
+    }
     for i in 0..n {
         for &(idx, g, at) in group {
-            // SAFETY: every slice holds the tile's n elements; the indices
-            // were checked against the target's length.
+            // SAFETY: as above.
             unsafe { *target.get_unchecked_mut(at.index(*idx.get_unchecked(i))) += *g.get_unchecked(i) };
+        }
+    }
+}
+
+/// [`scatter_group`] for `C` channels read at the same texel indices.
+#[inline(always)]
+fn scatter_channels<T: Real, const C: usize>(
+    target: &mut [T],
+    idx: &[T],
+    stride: usize,
+    group: &[(&[T], &[T], Strided)],
+    n: usize,
+) {
+    let g: [&[T]; C] = std::array::from_fn(|c| group[c].1);
+    let offset: [usize; C] = std::array::from_fn(|c| group[c].2.offset);
+    for i in 0..n {
+        // SAFETY: every slice holds the tile's n elements; the indices were
+        // checked against the target's length for every offset.
+        unsafe {
+            let base = idx.get_unchecked(i).to_index_unchecked() * stride;
+            for c in 0..C {
+                *target.get_unchecked_mut(base + offset[c]) += *g[c].get_unchecked(i);
+            }
         }
     }
 }
