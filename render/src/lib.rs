@@ -20,6 +20,7 @@ pub mod image_io;
 mod json;
 pub mod mesh;
 pub mod pose;
+pub mod posed;
 pub mod probe;
 pub mod procedural;
 pub mod sampling;
