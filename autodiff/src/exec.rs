@@ -135,6 +135,8 @@ struct Chunk<T> {
     vals: Vec<T>,
     adjs: Vec<T>,
     privates: Vec<Vec<T>>,
+    /// Views of `privates` for the tiles (kept to reuse the allocation).
+    private_ptrs: Vec<Ptr<T>>,
     bcast_grads: Vec<T>,
     non_finite: Option<NonFinite>,
 }
@@ -976,15 +978,9 @@ impl<T: Real> Ctx<'_, T> {
         }
         let vals = Ptr::of(&mut chunk.vals);
         let adjs = Ptr::of(&mut chunk.adjs);
-        let mut privates: [Ptr<T>; 8] = [Ptr::NULL; 8];
-        let privates: &mut [Ptr<T>] = if chunk.privates.len() <= 8 {
-            for (p, v) in privates.iter_mut().zip(chunk.privates.iter_mut()) {
-                *p = Ptr::of(v);
-            }
-            &mut privates[..chunk.privates.len()]
-        } else {
-            panic!("autodiff: a region gathers from or scatters into more than 8 distinct arrays")
-        };
+        chunk.private_ptrs.clear();
+        chunk.private_ptrs.extend(chunk.privates.iter_mut().map(|v| Ptr::of(v)));
+        let privates = &chunk.private_ptrs[..];
         for t in tiles {
             let t0 = t * TILE;
             let n = TILE.min(self.len - t0);
@@ -993,7 +989,7 @@ impl<T: Real> Ctx<'_, T> {
                 n,
                 vals,
                 adjs,
-                privates: &*privates,
+                privates,
                 chunk: c,
             };
             match self.pass {

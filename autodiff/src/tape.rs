@@ -360,6 +360,16 @@ impl<T: Real> Tape<T> {
         })
     }
 
+    /// The node's values, copied out (no guard: usable anywhere in an expression).
+    pub fn to_vec(&self, var: Var<'_, T>) -> Vec<T> {
+        self.value(var).to_vec()
+    }
+
+    /// The first value of a node (a scalar's value).
+    pub fn item(&self, var: Var<'_, T>) -> T {
+        self.value(var)[0]
+    }
+
     /// Gradient of the last [`backward`](Self::backward)'s output with
     /// respect to `var`: every leaf has one (zeros where the output does not
     /// depend on it); a computed node has one if it was kept in a buffer.

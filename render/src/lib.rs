@@ -13,11 +13,14 @@ macro_rules! assert_vec_close {
 }
 
 pub mod accel;
+pub mod bsdf;
 pub mod camera;
 pub mod envmap;
 pub mod error;
 pub mod image_io;
+pub mod integrator;
 mod json;
+pub mod lookup;
 pub mod mesh;
 pub mod pose;
 pub mod posed;

@@ -161,9 +161,9 @@ impl<'t, T: Real> PosedMesh<'t, T> {
     pub fn position_values(&self) -> Vec<Vec3> {
         let tape = self.positions.x.tape();
         let (x, y, z) = (
-            tape.value(self.positions.x).to_vec(),
-            tape.value(self.positions.y).to_vec(),
-            tape.value(self.positions.z).to_vec(),
+            tape.to_vec(self.positions.x),
+            tape.to_vec(self.positions.y),
+            tape.to_vec(self.positions.z),
         );
         x.iter()
             .zip(&y)
@@ -198,9 +198,9 @@ mod tests {
         ));
         let want = pose.transform_point(p);
         let got = Vec3::new(
-            tape.value(world.x)[0] as f32,
-            tape.value(world.y)[0] as f32,
-            tape.value(world.z)[0] as f32,
+            tape.item(world.x) as f32,
+            tape.item(world.y) as f32,
+            tape.item(world.z) as f32,
         );
         assert!(got.abs_diff_eq(want, 1e-5), "{got} vs {want}");
     }

@@ -59,6 +59,10 @@ impl<'t, T: Real> Var<'t, T> {
     pub fn affine(self, scale: T, offset: T) -> Self {
         Self::map(MapKind::Affine, [scale, offset], &[self])
     }
+    /// `c - self` (for generic code, where `T - Var` cannot be written).
+    pub fn rsub(self, c: T) -> Self {
+        self.affine(-T::one(), c)
+    }
     /// Square root.
     pub fn sqrt(self) -> Self {
         self.unary(MapKind::Sqrt)

@@ -1,0 +1,323 @@
+//! The forward model (PAPER.md): direct image-based lighting of the probe,
+//!
+//!   L(wo) = v(x) * integral of L_env(wi) f(wi, wo) cos(theta_i) dwi,
+//!
+//! estimated per sub-pixel sample with one BRDF sample (the BRDF's own
+//! importance sampling: GGX visible normals for the metal), times the soft
+//! visibility texture v, averaged into pixels.
+//!
+//! Two steps: [`PrimaryHits::trace`] finds which triangle each sub-pixel
+//! sample sees (a BVH, not differentiated); [`shade`] recomputes the hit
+//! point on that triangle from the posed vertices (Moller-Trumbore on the
+//! tape), so the image is differentiable in the pose through the hit point,
+//! the interpolated normal and uv, and in the env map, the textures and the
+//! roughness. Silhouette changes are not differentiated here: the soft masks
+//! of `silhouette` carry them.
+
+use autodiff::{Real, Tape, Var, Vec3 as Vec3Var};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::accel::{Accel, stratified_offsets};
+use crate::bsdf::{Bsdf, Surface};
+use crate::camera::Camera;
+use crate::image_io::RgbImage;
+use crate::lookup::{ImageVars, TextureVars};
+use crate::mesh::Mesh;
+use crate::posed::{MeshVars, PosedMesh};
+use crate::probe::ProbeAsset;
+use crate::sampling::Rng;
+
+/// Monte Carlo settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Samples per pixel (stratified sub-pixel positions, one BRDF sample each).
+    pub spp: u32,
+    /// Seed of every random number: the same seed gives the same image on any thread count.
+    pub seed: u64,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings { spp: 8, seed: 0 }
+    }
+}
+
+/// The sub-pixel samples of a camera that see the probe (not differentiated).
+#[derive(Clone, Debug, Default)]
+pub struct PrimaryHits {
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Row-major indices of the pixels at least one sample of which sees the probe.
+    pub pixels: Vec<u32>,
+    /// Fraction of each such pixel's samples that see the probe.
+    pub coverage: Vec<f32>,
+    /// Per hit sample: its position in `pixels`.
+    pub segment: Vec<u32>,
+    /// Per hit sample: the triangle seen.
+    pub triangle: Vec<u32>,
+    /// Per hit sample: the unit ray direction (world).
+    pub direction: Vec<Vec3>,
+    /// Per hit sample: two uniform random numbers for the BRDF sample.
+    pub random: Vec<Vec2>,
+}
+
+impl PrimaryHits {
+    /// Traces `spp` stratified rays through every pixel of the probe's
+    /// projected bounding box (the whole image if part of the probe is
+    /// behind the camera), against the mesh with `posed` vertex positions.
+    pub fn trace(mesh: &Mesh, posed: &[Vec3], camera: &Camera, settings: &RenderSettings) -> Self {
+        assert_eq!(
+            posed.len(),
+            mesh.positions.len(),
+            "PrimaryHits::trace: one posed position per vertex"
+        );
+        let spp = settings.spp.max(1) as usize;
+        let world = Mesh {
+            positions: posed.to_vec(),
+            ..mesh.clone()
+        };
+        let accel = Accel::new(&world);
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let (mut x0, mut y0, mut x1, mut y1) = (f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+        let mut all_in_front = true;
+        for &p in posed {
+            match camera.project(p) {
+                Some(q) => {
+                    (x0, y0, x1, y1) = (x0.min(q.x), y0.min(q.y), x1.max(q.x), y1.max(q.y));
+                }
+                None => all_in_front = false,
+            }
+        }
+        let (cols, rows) = if all_in_front {
+            let clip = |a: f32, n: usize| (a.max(0.0) as usize).min(n);
+            (
+                clip(x0.floor() - 1.0, w)..clip(x1.ceil() + 1.0, w),
+                clip(y0.floor() - 1.0, h)..clip(y1.ceil() + 1.0, h),
+            )
+        } else {
+            (0..w, 0..h)
+        };
+        // Per row, in parallel: (pixel, coverage, samples) in pixel order.
+        type RowHits = Vec<(u32, u32, Vec<(u32, Vec3, Vec2)>)>;
+        let per_row: Vec<RowHits> = rows
+            .into_par_iter()
+            .map(|row| {
+                let mut offsets = vec![Vec2::ZERO; spp];
+                let mut out = Vec::new();
+                for col in cols.clone() {
+                    let pixel = (row * w + col) as u32;
+                    stratified_offsets(settings.seed, pixel, &mut offsets);
+                    // A stream apart from the offsets' (which use the pixel index).
+                    let mut rng = Rng::new(settings.seed, (1u64 << 40) + pixel as u64);
+                    let mut hits = Vec::new();
+                    for &offset in &offsets {
+                        let (origin, dir) = camera.primary_ray(row as u32, col as u32, offset);
+                        let random = rng.next_2d();
+                        if let Some(hit) = accel.closest_hit(origin, dir, f32::INFINITY) {
+                            hits.push((hit.triangle, dir, random));
+                        }
+                    }
+                    if !hits.is_empty() {
+                        out.push((pixel, hits.len() as u32, hits));
+                    }
+                }
+                out
+            })
+            .collect();
+        let mut hits = PrimaryHits {
+            width: w,
+            height: h,
+            spp: spp as u32,
+            ..Default::default()
+        };
+        for (pixel, count, samples) in per_row.into_iter().flatten() {
+            let segment = hits.pixels.len() as u32;
+            hits.pixels.push(pixel);
+            hits.coverage.push(count as f32 / spp as f32);
+            for (triangle, dir, random) in samples {
+                hits.segment.push(segment);
+                hits.triangle.push(triangle);
+                hits.direction.push(dir);
+                hits.random.push(random);
+            }
+        }
+        hits
+    }
+
+    /// Number of hit samples.
+    pub fn len(&self) -> usize {
+        self.segment.len()
+    }
+
+    /// Whether no sample sees the probe.
+    pub fn is_empty(&self) -> bool {
+        self.segment.is_empty()
+    }
+
+    /// Spreads per-pixel values (one per entry of `pixels`) over a full image.
+    pub fn to_image(&self, rgb: [&[f64]; 3]) -> RgbImage {
+        let mut image = RgbImage::filled(self.width, self.height, [0.0; 3]);
+        for (k, &p) in self.pixels.iter().enumerate() {
+            image.pixels[p as usize] = [rgb[0][k] as f32, rgb[1][k] as f32, rgb[2][k] as f32];
+        }
+        image
+    }
+}
+
+/// The probe on a tape: mesh arrays and material textures.
+#[derive(Clone, Copy, Debug)]
+pub struct ProbeVars<'t, T: Real> {
+    /// Vertex arrays (mesh frame).
+    pub mesh: MeshVars<'t, T>,
+    /// Specular albedo A.
+    pub albedo: TextureVars<'t, T>,
+    /// Roughness r (first channel).
+    pub roughness: TextureVars<'t, T>,
+    /// Soft visibility v (first channel).
+    pub visibility: TextureVars<'t, T>,
+}
+
+impl<'t, T: Real> ProbeVars<'t, T> {
+    /// Records a probe; `material_gradients` makes its textures leaves.
+    pub fn new(tape: &'t Tape<T>, probe: &ProbeAsset, material_gradients: bool) -> Self {
+        ProbeVars {
+            mesh: MeshVars::new(tape, &probe.mesh),
+            albedo: TextureVars::new(tape, &probe.albedo, material_gradients),
+            roughness: TextureVars::new(tape, &probe.roughness, material_gradients),
+            visibility: TextureVars::new(tape, &probe.visibility, material_gradients),
+        }
+    }
+}
+
+/// Per-sample constants of the hits, on a tape.
+struct SampleVars<'t, T: Real> {
+    direction: Vec3Var<'t, T>,
+    corners: [Var<'t, T>; 3],
+    segment: Var<'t, T>,
+    random: [Var<'t, T>; 2],
+}
+
+impl<'t, T: Real> SampleVars<'t, T> {
+    fn new(tape: &'t Tape<T>, hits: &PrimaryHits, triangles: &[[u32; 3]]) -> Self {
+        let array = |f: &dyn Fn(usize) -> f64| tape.constant(&(0..hits.len()).map(|i| T::c(f(i))).collect::<Vec<T>>());
+        let corner = |k: usize| array(&|i| triangles[hits.triangle[i] as usize][k] as f64);
+        SampleVars {
+            direction: Vec3Var::new(
+                array(&|i| hits.direction[i].x as f64),
+                array(&|i| hits.direction[i].y as f64),
+                array(&|i| hits.direction[i].z as f64),
+            ),
+            corners: [corner(0), corner(1), corner(2)],
+            segment: array(&|i| hits.segment[i] as f64),
+            random: [array(&|i| hits.random[i].x as f64), array(&|i| hits.random[i].y as f64)],
+        }
+    }
+}
+
+/// Gathers a vector field at per-sample vertex indices.
+fn gather3<'t, T: Real>(field: Vec3Var<'t, T>, idx: Var<'t, T>) -> Vec3Var<'t, T> {
+    Vec3Var::new(field.x.gather(idx), field.y.gather(idx), field.z.gather(idx))
+}
+
+/// The shading frame (s, t, n) around unit normals `n`, with s along the
+/// view direction's tangential part. The GGX lobe is isotropic, so any frame
+/// gives the same integral; this one is smooth in `n` everywhere except
+/// where `wo` is along `n`, whereas a frame fixed to world axes (Duff et al.
+/// 2017) jumps across a whole great circle of normals, and with it the
+/// sampled directions: finite differences and gradients would see the jump.
+/// At normal incidence it falls back to Duff's frame.
+fn frame<'t, T: Real>(n: Vec3Var<'t, T>, wo: Vec3Var<'t, T>) -> (Vec3Var<'t, T>, Vec3Var<'t, T>) {
+    let tape = n.x.tape();
+    let tangent = wo - n.scale(n.dot(wo));
+    let len2 = tangent.dot(tangent);
+    let view_aligned = len2.gt(tape.scalar(T::c(1e-10)));
+    let s_view = tangent.scale(len2.max_scalar(T::c(1e-10)).rsqrt());
+    // Duff et al. 2017, listing 3; the sign choice is piecewise constant.
+    let sign =
+        n.z.ge(tape.scalar(T::zero()))
+            .select(tape.scalar(T::one()), tape.scalar(-T::one()));
+    let a = -(sign + n.z).recip_var();
+    let b = n.x * n.y * a;
+    let s_duff = Vec3Var::new(
+        (sign * n.x * n.x).mul_add(a, tape.scalar(T::one())),
+        sign * b,
+        -(sign * n.x),
+    );
+    let s = Vec3Var::new(
+        view_aligned.select(s_view.x, s_duff.x),
+        view_aligned.select(s_view.y, s_duff.y),
+        view_aligned.select(s_view.z, s_duff.z),
+    );
+    (s, n.cross(s))
+}
+
+trait Recip {
+    fn recip_var(self) -> Self;
+}
+
+impl<'t, T: Real> Recip for Var<'t, T> {
+    fn recip_var(self) -> Self {
+        self.tape().scalar(T::one()) / self
+    }
+}
+
+/// Renders the probe's radiance into the pixels of `hits`: one array per
+/// channel, aligned with `hits.pixels`, averaged over the pixel's `spp`
+/// samples (a partly covered pixel sums only its probe samples: the
+/// background is black).
+#[allow(clippy::too_many_arguments)]
+pub fn shade<'t, T: Real>(
+    tape: &'t Tape<T>,
+    hits: &PrimaryHits,
+    camera: &Camera,
+    probe: &ProbeVars<'t, T>,
+    posed: &PosedMesh<'t, T>,
+    triangles: &[[u32; 3]],
+    env: &ImageVars<'t, T>,
+    bsdf: &dyn Bsdf<T>,
+) -> [Var<'t, T>; 3] {
+    assert!(!hits.is_empty(), "shade: no sample sees the probe");
+    let s = SampleVars::new(tape, hits, triangles);
+    let origin = Vec3Var::constant(
+        tape,
+        [camera.origin.x, camera.origin.y, camera.origin.z].map(|c| T::c(c as f64)),
+    );
+    let inv_spp = T::c(1.0 / hits.spp as f64);
+    // The hit point on the (moving) triangle along the (fixed) ray: Moller-Trumbore.
+    let [p0, p1, p2] = s.corners.map(|c| gather3(posed.positions, c));
+    let (e1, e2) = (p1 - p0, p2 - p0);
+    let pvec = s.direction.cross(e2);
+    let inv_det = e1.dot(pvec).recip_var();
+    let tvec = origin - p0;
+    let b1 = tvec.dot(pvec) * inv_det;
+    let qvec = tvec.cross(e1);
+    let b2 = s.direction.dot(qvec) * inv_det;
+    let interpolate = |f: [Var<'t, T>; 3]| (f[1] - f[0]).mul_add(b1, (f[2] - f[0]).mul_add(b2, f[0]));
+    let [n0, n1, n2] = s.corners.map(|c| gather3(posed.normals, c));
+    let n = Vec3Var::new(
+        interpolate([n0.x, n1.x, n2.x]),
+        interpolate([n0.y, n1.y, n2.y]),
+        interpolate([n0.z, n1.z, n2.z]),
+    )
+    .normalize(T::c(1e-12));
+    let [u, v] = posed.uv.map(|uv| interpolate(s.corners.map(|c| uv.gather(c))));
+    // Shading in the local frame of the interpolated normal.
+    let wo_world = -s.direction;
+    let (ts, tt) = frame(n, wo_world);
+    let wo = Vec3Var::new(ts.dot(wo_world), tt.dot(wo_world), n.dot(wo_world));
+    let surface = Surface {
+        albedo: probe.albedo.lookup(u, v),
+        roughness: probe.roughness.lookup(u, v)[0],
+    };
+    let visibility = probe.visibility.lookup(u, v)[0];
+    let sample = bsdf.sample(&surface, wo, s.random);
+    let wi = ts.scale(sample.wi.x) + tt.scale(sample.wi.y) + n.scale(sample.wi.z);
+    let radiance = env.env_radiance(wi);
+    let scale = visibility * inv_spp;
+    std::array::from_fn(|c| (sample.weight[c] * radiance[c] * scale).segmented_sum(s.segment, hits.pixels.len()))
+}
