@@ -1,1 +1,12 @@
-//! Accidental light probes: losses, joint pose + lighting estimation, acquisition, evaluation and the `alp` CLI.
+//! Accidental light probes: recover the lighting (an environment map) and the
+//! probe's pose from one HDR photo of a known shiny object (Yu et al., CVPR
+//! 2023), by inverting the differentiable renderer of the `render` crate.
+//!
+//! This crate holds what the method adds on top of the renderer: output
+//! folders written atomically, the probe catalogue, and (landing next) the
+//! declarative objective, the estimation, evaluation and the `alp` CLI.
+
+pub mod output;
+pub mod probes;
+
+pub use render::{RenderError, Result};

@@ -21,10 +21,12 @@ use rayon::prelude::*;
 use crate::accel::{Accel, stratified_offsets};
 use crate::bsdf::{Bsdf, Surface};
 use crate::camera::Camera;
-use crate::image_io::RgbImage;
+use crate::envmap::EnvMap;
+use crate::image_io::{Mask, RgbImage};
 use crate::lookup::{ImageVars, TextureVars};
 use crate::mesh::Mesh;
-use crate::posed::{MeshVars, PosedMesh};
+use crate::pose::Pose;
+use crate::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use crate::probe::ProbeAsset;
 use crate::sampling::Rng;
 
@@ -320,4 +322,42 @@ pub fn shade<'t, T: Real>(
     let radiance = env.env_radiance(wi);
     let scale = visibility * inv_spp;
     std::array::from_fn(|c| (sample.weight[c] * radiance[c] * scale).segmented_sum(s.segment, hits.pixels.len()))
+}
+
+/// Renders the probe at `pose` under `env` (f32, no gradients): the image
+/// (black background) and the hard coverage mask (at least half of a pixel's
+/// samples see the probe).
+pub fn render_image(
+    probe: &ProbeAsset,
+    pose: &Pose,
+    camera: &Camera,
+    env: &EnvMap,
+    bsdf: &dyn Bsdf<f32>,
+    settings: &RenderSettings,
+) -> (RgbImage, Mask) {
+    let tape = Tape::<f32>::new();
+    let vars = ProbeVars::new(&tape, probe, false);
+    let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
+    let hits = PrimaryHits::trace(&probe.mesh, &posed.position_values(), camera, settings);
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut mask = Mask::new(w, h, vec![false; w * h]);
+    if hits.is_empty() {
+        return (RgbImage::filled(w, h, [0.0; 3]), mask);
+    }
+    let env_vars = ImageVars::env(&tape, env, false);
+    let rgb = shade(
+        &tape,
+        &hits,
+        camera,
+        &vars,
+        &posed,
+        &probe.mesh.triangles,
+        &env_vars,
+        bsdf,
+    );
+    let rgb = rgb.map(|c| tape.to_vec(c).iter().map(|&v| v as f64).collect::<Vec<f64>>());
+    for (&p, &c) in hits.pixels.iter().zip(&hits.coverage) {
+        mask.inside[p as usize] = c >= 0.5;
+    }
+    (hits.to_image([&rgb[0], &rgb[1], &rgb[2]]), mask)
 }
