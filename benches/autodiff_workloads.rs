@@ -202,7 +202,7 @@ fn elementwise_chain(n: usize, threads: usize) {
     let x = chain_input(n);
     for backward in [false, true] {
         let mode = if backward { "fwd_bwd" } else { "fwd" };
-        let mut tape = Tape::<f32>::new();
+        let tape = Tape::<f32>::new();
         let xid = tape.leaf(&x).id();
         let mark = tape.mark();
         let (med, min, runs, (y, grad)) = time(|| {
@@ -338,7 +338,7 @@ fn gather_scatter(m: usize, threads: usize) {
     let d = gather_data(m);
     for backward in [false, true] {
         let mode = if backward { "fwd_bwd" } else { "fwd" };
-        let mut tape = Tape::<f32>::new();
+        let tape = Tape::<f32>::new();
         let table = tape.leaf(&d.table).id();
         let texel = tape.constant(&d.texel).id();
         let weight = tape.constant(&d.weight).id();
@@ -442,7 +442,7 @@ fn small_ops_overhead(threads: usize) {
     let x: [f32; 8] = std::array::from_fn(|l| (0.1 * (l + 1) as f64) as f32);
     for backward in [false, true] {
         let mode = if backward { "fwd_bwd" } else { "fwd" };
-        let mut tape = Tape::<f32>::new();
+        let tape = Tape::<f32>::new();
         let xid = tape.leaf(&x).id();
         let mark = tape.mark();
         let (med, min, runs, (y, s)) = time(|| {

@@ -49,7 +49,7 @@ fn data<T: Real>(pixels: usize) -> Data<T> {
 fn main() {
     // Speed, in f32.
     let d32 = data::<f32>(PIXELS);
-    let mut tape = Tape::<f32>::new();
+    let tape = Tape::<f32>::new();
     let table = tape
         .leaf(
             &uniform(TEXELS, 0.0, 2.0, 4)

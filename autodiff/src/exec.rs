@@ -3,7 +3,8 @@
 //! A *region* is a run of consecutive nodes over one domain of `len`
 //! elements: elementwise maps, gathers from arrays computed earlier, and the
 //! sums and scatter-adds that end the chain (its *sinks*). A region runs tile
-//! by tile (`TILE` elements): every op of the chain is applied to one tile
+//! by tile (256 to 1024 elements, fewer for longer chains so that a tile's
+//! values and adjoints stay in L2): every op of the chain is applied to one tile
 //! before the next tile starts, so the intermediates stay in cache instead of
 //! streaming through main memory. Only values that leave the region (used by
 //! a later step, or asked for) are written to full-length buffers; the rest
@@ -30,9 +31,23 @@ use crate::ops::custom::CustomOp;
 use crate::real::Real;
 use crate::tape::{Graph, NONE, Node, NonFinite, Op};
 
-/// Elements per tile: a chain of a few dozen ops keeps its tile values and
-/// adjoints (2 x 4 bytes x TILE per op) within the per-core L2 cache.
+/// Most elements per tile.
 pub(crate) const TILE: usize = 1024;
+/// Fewest elements per tile: below this the per-op dispatch dominates.
+const MIN_TILE: usize = 256;
+/// Bytes of tile values and adjoints a chunk aims to keep in the per-core L2
+/// cache: a long chain (a renderer's few hundred ops per sample) gets
+/// shorter tiles than a short one.
+const TILE_BYTES: usize = 512 << 10;
+
+/// The tile length of a region with `slots` tile arrays: the longest power
+/// of two whose values and adjoints fit [`TILE_BYTES`], within
+/// [`MIN_TILE`]..=[`TILE`]. Depends on the program only, never on threads.
+fn tile_for<T>(slots: usize) -> usize {
+    let fit = TILE_BYTES / (2 * std::mem::size_of::<T>() * slots.max(1));
+    let pow2 = if fit == 0 { 1 } else { 1 << fit.ilog2() };
+    pow2.clamp(MIN_TILE, TILE)
+}
 /// Regions below this length run on the calling thread.
 const PARALLEL_MIN_LEN: usize = 1 << 15;
 /// Longer regions are cut into this many chunks of tiles, spread over the
@@ -764,7 +779,8 @@ impl<T: Real> Graph<T> {
             let n = &self.nodes[ex.bcasts[b] as usize];
             ex.bcast_values.push(self.values.bufs[n.value as usize][0]);
         }
-        let tiles = reg.len.div_ceil(TILE);
+        let tile = tile_for::<T>(reg.slots + reg.bcasts.len());
+        let tiles = reg.len.div_ceil(tile);
         // The split depends on the length only, never on the thread count, so
         // that accumulations (scatter outputs, gradients of gathered arrays and
         // broadcast scalars) add up in the same order on any machine.
@@ -773,7 +789,7 @@ impl<T: Real> Graph<T> {
         } else {
             1
         };
-        let tile_len = reg.len.min(TILE);
+        let tile_len = reg.len.min(tile);
         let per_chunk = (reg.slots + reg.bcasts.len()) * tile_len;
         if ex.chunks.len() < threads {
             ex.chunks.resize_with(threads, Chunk::default);
@@ -982,8 +998,8 @@ impl<T: Real> Ctx<'_, T> {
         chunk.private_ptrs.extend(chunk.privates.iter_mut().map(|v| Ptr::of(v)));
         let privates = &chunk.private_ptrs[..];
         for t in tiles {
-            let t0 = t * TILE;
-            let n = TILE.min(self.len - t0);
+            let t0 = t * self.tile_len;
+            let n = self.tile_len.min(self.len - t0);
             let tile = Tile {
                 t0,
                 n,

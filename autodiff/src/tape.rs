@@ -76,6 +76,9 @@ pub(crate) struct Node<T> {
     pub materialize: bool,
     /// During a region's backward pass: the adjoint buffer holds nothing yet.
     pub fresh: bool,
+    /// The tape's reset count when the node was recorded: a `Var` of an
+    /// earlier count at the same index is stale.
+    pub epoch: u32,
 }
 
 /// A growable set of reusable buffers: `reset` returns them all, and the next
@@ -152,6 +155,8 @@ pub(crate) struct Graph<T: Real> {
     pub exec: crate::exec::Executor<T>,
     pub check_finite: bool,
     pub non_finite: Option<NonFinite>,
+    /// Number of resets so far (see `Node::epoch`).
+    pub epoch: u32,
 }
 
 /// A position on the tape to return to with [`Tape::reset_to`].
@@ -182,12 +187,16 @@ pub struct Tape<T: Real> {
 #[derive(Clone, Copy)]
 pub struct Var<'t, T: Real> {
     pub(crate) tape: &'t Tape<T>,
-    pub(crate) id: u32,
+    index: u32,
+    epoch: u32,
 }
 
 /// A node's index, without the borrow of the tape (to keep leaves across iterations).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct VarId(pub(crate) u32);
+pub struct VarId {
+    index: u32,
+    epoch: u32,
+}
 
 impl<T: Real> Default for Tape<T> {
     fn default() -> Self {
@@ -215,12 +224,14 @@ impl<T: Real> Tape<T> {
                 exec: Default::default(),
                 check_finite: false,
                 non_finite: None,
+                epoch: 0,
             }),
         }
     }
 
-    /// Removes every node but keeps every buffer for the next iteration.
-    pub fn clear(&mut self) {
+    /// Removes every node but keeps every buffer for the next iteration
+    /// (handles recorded before become stale).
+    pub fn clear(&self) {
         self.reset_to(Mark {
             nodes: 0,
             edges: 0,
@@ -249,9 +260,13 @@ impl<T: Real> Tape<T> {
         }
     }
 
-    /// Drops every node recorded after `mark`, keeping the buffers.
-    pub fn reset_to(&mut self, mark: Mark) {
-        let g = self.graph.get_mut();
+    /// Drops every node recorded after `mark`, keeping the buffers. Handles
+    /// to nodes before the mark stay valid; using a handle to a dropped node
+    /// panics (it is stale, not silently another node).
+    pub fn reset_to(&self, mark: Mark) {
+        let mut g = self.graph_mut("reset_to");
+        let g = &mut *g;
+        g.epoch += 1;
         assert!(
             mark.nodes <= g.nodes.len(),
             "reset_to: the mark is beyond the tape's end"
@@ -296,7 +311,11 @@ impl<T: Real> Tape<T> {
         if g.executed == id as usize {
             g.executed += 1;
         }
-        Var { tape: self, id }
+        Var {
+            tape: self,
+            index: id,
+            epoch: g.epoch,
+        }
     }
 
     /// Replaces a leaf's or constant's values (same length), e.g. the
@@ -305,41 +324,42 @@ impl<T: Real> Tape<T> {
     /// Panics if a computed node already follows it on the tape: its value
     /// would be stale.
     pub fn set_values(&self, var: VarId, values: &[T]) {
-        let mut g = self.graph.borrow_mut();
-        let node = g.nodes[var.0 as usize];
+        let mut g = self.graph_mut("set_values");
+        let id = g.check(var.index, var.epoch, "set_values");
+        let node = g.nodes[id as usize];
         assert!(
             matches!(node.op, Op::Leaf | Op::Constant),
             "set_values: node {} is a computed `{}`, not an input",
-            var.0,
+            id,
             node.op.name()
         );
         assert_eq!(
             values.len(),
             node.len as usize,
             "set_values: node {} has {} elements, got {}",
-            var.0,
+            id,
             node.len,
             values.len()
         );
-        let later_computed = g.nodes[var.0 as usize..]
+        let later_computed = g.nodes[id as usize..]
             .iter()
             .any(|n| !matches!(n.op, Op::Leaf | Op::Constant));
         assert!(
             !later_computed,
             "set_values: computed nodes follow node {} on the tape; reset_to a mark first",
-            var.0
+            id
         );
         g.values.bufs[node.value as usize].copy_from_slice(values);
     }
 
-    /// Re-wraps a node index as a handle.
+    /// Re-wraps a node index as a handle (panics if the node was dropped by a reset).
     pub fn var(&self, id: VarId) -> Var<'_, T> {
-        assert!(
-            (id.0 as usize) < self.graph.borrow().nodes.len(),
-            "var: node {} is not on the tape",
-            id.0
-        );
-        Var { tape: self, id: id.0 }
+        self.graph.borrow().check(id.index, id.epoch, "var");
+        Var {
+            tape: self,
+            index: id.index,
+            epoch: id.epoch,
+        }
     }
 
     /// The node's values (computed now if pending).
@@ -347,15 +367,16 @@ impl<T: Real> Tape<T> {
     /// The returned guard borrows the tape: copy what you need (`to_vec`, `[0]`)
     /// before recording or computing more.
     pub fn value(&self, var: Var<'_, T>) -> Ref<'_, [T]> {
+        let id = var.node();
         let ready = {
             let g = self.graph.borrow();
-            (var.id as usize) < g.executed && g.nodes[var.id as usize].value != NONE
+            (id as usize) < g.executed && g.nodes[id as usize].value != NONE
         };
         if !ready {
-            self.graph_mut("value").execute(Some(var.id));
+            self.graph_mut("value").execute(Some(id));
         }
         Ref::map(self.graph.borrow(), |g| {
-            let n = &g.nodes[var.id as usize];
+            let n = &g.nodes[id as usize];
             &g.values.bufs[n.value as usize][..n.len as usize]
         })
     }
@@ -374,17 +395,18 @@ impl<T: Real> Tape<T> {
     /// respect to `var`: every leaf has one (zeros where the output does not
     /// depend on it); a computed node has one if it was kept in a buffer.
     pub fn grad(&self, var: Var<'_, T>) -> Ref<'_, [T]> {
+        let id = var.node();
         let g = self.graph.borrow();
-        let n = &g.nodes[var.id as usize];
+        let n = &g.nodes[id as usize];
         assert!(
             n.adjoint != NONE,
             "grad: node {} (`{}`) has no gradient: call backward first; gradients of \
              intermediate values are not kept unless they are read elsewhere (make it a leaf)",
-            var.id,
+            id,
             n.op.name()
         );
         Ref::map(g, |g| {
-            let n = &g.nodes[var.id as usize];
+            let n = &g.nodes[id as usize];
             &g.adjoints.bufs[n.adjoint as usize][..n.len as usize]
         })
     }
@@ -404,10 +426,11 @@ impl<T: Real> Tape<T> {
     /// node that needs one. Each call starts afresh, so several backward
     /// passes after one forward give the gradients of several outputs.
     pub fn backward(&self, output: Var<'_, T>) {
+        let id = output.node();
         let mut g = self.graph_mut("backward");
-        let len = g.nodes[output.id as usize].len;
+        let len = g.nodes[id as usize].len;
         assert_eq!(len, 1, "backward: the output must have one element, it has {len}");
-        g.backward(output.id);
+        g.backward(id);
     }
 
     /// In check mode, every op's output (and every adjoint) is scanned and
@@ -441,42 +464,73 @@ impl<T: Real> Tape<T> {
     }
 
     /// Records a node; shapes are checked by the caller.
-    pub(crate) fn record(&self, op: Op<T>, len: usize, inputs: &[u32]) -> Var<'_, T> {
+    pub(crate) fn record<'a>(&'a self, op: Op<T>, len: usize, inputs: &[Var<'a, T>]) -> Var<'a, T> {
         self.record_iter(op, len, inputs.iter().copied())
     }
 
     /// [`record`](Self::record) for inputs given by an iterator (no
     /// temporary list to allocate).
-    pub(crate) fn record_iter(&self, op: Op<T>, len: usize, inputs: impl Iterator<Item = u32>) -> Var<'_, T> {
-        let mut g = self.graph_mut(op.name());
-        let differentiable = match op {
-            Op::Map(kind, _) => kind.differentiable(),
-            Op::Constant => false,
-            _ => true,
-        };
-        let first = g.edges.len();
-        g.edges.extend(inputs);
-        let requires_grad = differentiable && g.edges[first..].iter().any(|&i| g.nodes[i as usize].requires_grad);
-        let id = g.push_node(op, len, first, requires_grad);
-        Var { tape: self, id }
+    pub(crate) fn record_iter<'a>(
+        &'a self,
+        op: Op<T>,
+        len: usize,
+        inputs: impl Iterator<Item = Var<'a, T>>,
+    ) -> Var<'a, T> {
+        self.push_computed(op, len, inputs, true)
     }
 
     /// Records a node whose gradient is cut (stop_gradient).
-    pub(crate) fn record_detached(&self, op: Op<T>, len: usize, inputs: &[u32]) -> Var<'_, T> {
-        let mut g = self.graph_mut(op.name());
-        let first = g.edges.len();
-        g.edges.extend_from_slice(inputs);
-        let id = g.push_node(op, len, first, false);
-        Var { tape: self, id }
+    pub(crate) fn record_detached<'a>(&'a self, op: Op<T>, len: usize, inputs: &[Var<'a, T>]) -> Var<'a, T> {
+        self.push_computed(op, len, inputs.iter().copied(), false)
     }
 
-    /// Length of a node.
-    pub(crate) fn len_of(&self, id: u32) -> usize {
-        self.graph.borrow().nodes[id as usize].len as usize
+    fn push_computed<'a>(
+        &'a self,
+        op: Op<T>,
+        len: usize,
+        inputs: impl Iterator<Item = Var<'a, T>>,
+        gradients: bool,
+    ) -> Var<'a, T> {
+        let mut g = self.graph_mut(op.name());
+        let differentiable = gradients
+            && match op {
+                Op::Map(kind, _) => kind.differentiable(),
+                Op::Constant => false,
+                _ => true,
+            };
+        let first = g.edges.len();
+        for v in inputs {
+            assert!(
+                std::ptr::eq(v.tape, self),
+                "{}: operands live on different tapes",
+                op.name()
+            );
+            let id = g.check(v.index, v.epoch, op.name());
+            g.edges.push(id);
+        }
+        let requires_grad = differentiable && g.edges[first..].iter().any(|&i| g.nodes[i as usize].requires_grad);
+        let id = g.push_node(op, len, first, requires_grad);
+        Var {
+            tape: self,
+            index: id,
+            epoch: g.epoch,
+        }
     }
 }
 
 impl<T: Real> Graph<T> {
+    /// The index of a handle's node, after checking that the node is still
+    /// the one the handle was made for.
+    pub(crate) fn check(&self, index: u32, epoch: u32, what: &str) -> u32 {
+        match self.nodes.get(index as usize) {
+            Some(n) if n.epoch == epoch => index,
+            _ => panic!(
+                "{what}: stale handle to node {index}: it was recorded after the mark the tape was reset to \
+                 (reset_to / clear); record it again each iteration, or before the mark"
+            ),
+        }
+    }
+
     /// Appends a node whose inputs are the edges from `first_input` to the end.
     fn push_node(&mut self, op: Op<T>, len: usize, first_input: usize, requires_grad: bool) -> u32 {
         assert!(
@@ -497,6 +551,7 @@ impl<T: Real> Graph<T> {
             slot: NONE,
             materialize: false,
             fresh: false,
+            epoch: self.epoch,
         });
         id
     }
@@ -512,7 +567,8 @@ impl<T: Real> Graph<T> {
 impl<'t, T: Real> Var<'t, T> {
     /// Number of elements.
     pub fn len(self) -> usize {
-        self.tape.len_of(self.id)
+        let id = self.node();
+        self.tape.graph.borrow().nodes[id as usize].len as usize
     }
 
     /// Whether the array is empty (never: arrays have at least one element).
@@ -522,7 +578,15 @@ impl<'t, T: Real> Var<'t, T> {
 
     /// The node's index, to keep across iterations (see [`Tape::var`]).
     pub fn id(self) -> VarId {
-        VarId(self.id)
+        VarId {
+            index: self.node(),
+            epoch: self.epoch,
+        }
+    }
+
+    /// The node's index, checked to be current.
+    pub(crate) fn node(self) -> u32 {
+        self.tape.graph.borrow().check(self.index, self.epoch, "handle")
     }
 
     /// The tape this node lives on.
@@ -532,7 +596,8 @@ impl<'t, T: Real> Var<'t, T> {
 
     /// Whether gradients flow into this node.
     pub fn requires_grad(self) -> bool {
-        self.tape.graph.borrow().nodes[self.id as usize].requires_grad
+        let id = self.node();
+        self.tape.graph.borrow().nodes[id as usize].requires_grad
     }
 
     pub(crate) fn same_tape(self, other: Var<'_, T>, op: &str) {
@@ -546,7 +611,9 @@ impl<'t, T: Real> Var<'t, T> {
 impl<T: Real> std::fmt::Debug for Var<'_, T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let g = self.tape.graph.borrow();
-        let n = &g.nodes[self.id as usize];
-        write!(f, "Var(#{} {} [{}])", self.id, n.op.name(), n.len)
+        match g.nodes.get(self.index as usize) {
+            Some(n) if n.epoch == self.epoch => write!(f, "Var(#{} {} [{}])", self.index, n.op.name(), n.len),
+            _ => write!(f, "Var(#{} stale)", self.index),
+        }
     }
 }

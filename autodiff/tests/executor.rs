@@ -122,7 +122,7 @@ fn several_backward_passes_from_one_forward() {
 #[test]
 fn memory_is_flat_across_iterations() {
     let n = 70_000;
-    let mut tape = Tape::<f32>::new();
+    let tape = Tape::<f32>::new();
     let x = tape.leaf(&vec![0.5f32; n]).id();
     let mark = tape.mark();
     let mut reserved = Vec::new();
@@ -252,7 +252,7 @@ fn an_input_that_a_region_reads_but_does_not_differentiate_still_gets_the_right_
     // Region R reads x only through a value that does not reach the loss; x's
     // gradient comes from an earlier region. Run twice so that reused buffers
     // hold stale values.
-    let mut tape = Tape::<f64>::new();
+    let tape = Tape::<f64>::new();
     let x = tape.leaf(&[1.0, 2.0, 3.0]).id();
     let w = tape.leaf(&[1.0, 1.0, 1.0]).id();
     let mark = tape.mark();

@@ -34,7 +34,7 @@ fn iterations_after_the_first_allocate_nothing() {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
     pool.install(|| {
         let n = 40_000;
-        let mut tape = Tape::<f32>::new();
+        let tape = Tape::<f32>::new();
         let x = tape.leaf(&vec![0.25f32; n]).id();
         let table = tape.leaf(&[0.5f32; 300]).id();
         let idx: Vec<f32> = (0..n).map(|i| (i % 100) as f32).collect();

@@ -54,6 +54,8 @@ pub struct PrimaryHits {
     pub height: usize,
     /// Samples per pixel.
     pub spp: u32,
+    /// Rays traced (the bounding box's pixels times `spp`).
+    pub rays: usize,
     /// Row-major indices of the pixels at least one sample of which sees the probe.
     pub pixels: Vec<u32>,
     /// Fraction of each such pixel's samples that see the probe.
@@ -104,48 +106,54 @@ impl PrimaryHits {
         } else {
             (0..w, 0..h)
         };
-        // Per row, in parallel: (pixel, coverage, samples) in pixel order.
-        type RowHits = Vec<(u32, u32, Vec<(u32, Vec3, Vec2)>)>;
+        // Per row, in parallel: the hit pixels (index, hit count) and the hit
+        // samples, in pixel order.
+        type RowHits = (Vec<(u32, u32)>, Vec<(u32, Vec3, Vec2)>);
+        let rows_traced = rows.len();
         let per_row: Vec<RowHits> = rows
             .into_par_iter()
             .map(|row| {
                 let mut offsets = vec![Vec2::ZERO; spp];
-                let mut out = Vec::new();
+                let (mut pixels, mut samples) = (Vec::new(), Vec::new());
                 for col in cols.clone() {
                     let pixel = (row * w + col) as u32;
                     stratified_offsets(settings.seed, pixel, &mut offsets);
                     // A stream apart from the offsets' (which use the pixel index).
                     let mut rng = Rng::new(settings.seed, (1u64 << 40) + pixel as u64);
-                    let mut hits = Vec::new();
+                    let before = samples.len();
                     for &offset in &offsets {
                         let (origin, dir) = camera.primary_ray(row as u32, col as u32, offset);
                         let random = rng.next_2d();
                         if let Some(hit) = accel.closest_hit(origin, dir, f32::INFINITY) {
-                            hits.push((hit.triangle, dir, random));
+                            samples.push((hit.triangle, dir, random));
                         }
                     }
-                    if !hits.is_empty() {
-                        out.push((pixel, hits.len() as u32, hits));
+                    if samples.len() > before {
+                        pixels.push((pixel, (samples.len() - before) as u32));
                     }
                 }
-                out
+                (pixels, samples)
             })
             .collect();
         let mut hits = PrimaryHits {
             width: w,
             height: h,
             spp: spp as u32,
+            rays: cols.len() * rows_traced * spp,
             ..Default::default()
         };
-        for (pixel, count, samples) in per_row.into_iter().flatten() {
-            let segment = hits.pixels.len() as u32;
-            hits.pixels.push(pixel);
-            hits.coverage.push(count as f32 / spp as f32);
-            for (triangle, dir, random) in samples {
-                hits.segment.push(segment);
-                hits.triangle.push(triangle);
-                hits.direction.push(dir);
-                hits.random.push(random);
+        for (pixels, samples) in per_row {
+            let mut samples = samples.into_iter();
+            for (pixel, count) in pixels {
+                let segment = hits.pixels.len() as u32;
+                hits.pixels.push(pixel);
+                hits.coverage.push(count as f32 / spp as f32);
+                for (triangle, dir, random) in samples.by_ref().take(count as usize) {
+                    hits.segment.push(segment);
+                    hits.triangle.push(triangle);
+                    hits.direction.push(dir);
+                    hits.random.push(random);
+                }
             }
         }
         hits

@@ -27,5 +27,6 @@ pub mod posed;
 pub mod probe;
 pub mod procedural;
 pub mod sampling;
+pub mod silhouette;
 
 pub use error::{RenderError, Result};

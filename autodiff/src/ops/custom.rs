@@ -32,7 +32,6 @@ impl<T: Real> Tape<T> {
             op.name(),
             inputs.len()
         );
-        let mut ids = [0u32; MAX_INPUTS];
         let mut lens = [0usize; MAX_INPUTS];
         for (k, v) in inputs.iter().enumerate() {
             assert!(
@@ -40,7 +39,6 @@ impl<T: Real> Tape<T> {
                 "custom op `{}`: operands live on different tapes",
                 op.name()
             );
-            ids[k] = v.id;
             lens[k] = v.len();
         }
         let len = op.output_len(&lens[..inputs.len()]);
@@ -54,6 +52,6 @@ impl<T: Real> Tape<T> {
             g.customs.push(op);
             g.customs.len() as u32 - 1
         };
-        self.record(Op::Custom(index), len, &ids[..inputs.len()])
+        self.record(Op::Custom(index), len, inputs)
     }
 }

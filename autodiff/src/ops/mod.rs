@@ -22,8 +22,7 @@ impl<'t, T: Real> Var<'t, T> {
     fn map(kind: MapKind, params: [T; 2], inputs: &[Var<'t, T>]) -> Var<'t, T> {
         let tape = inputs[0].tape;
         let mut len = 1;
-        let mut ids = [0u32; 3];
-        for (k, v) in inputs.iter().enumerate() {
+        for v in inputs {
             inputs[0].same_tape(*v, kind.name());
             let l = v.len();
             if l != 1 {
@@ -37,9 +36,8 @@ impl<'t, T: Real> Var<'t, T> {
                 }
                 len = l;
             }
-            ids[k] = v.id;
         }
-        tape.record(Op::Map(kind, params), len, &ids[..inputs.len()])
+        tape.record(Op::Map(kind, params), len, inputs)
     }
 
     fn unary(self, kind: MapKind) -> Self {
@@ -180,7 +178,7 @@ impl<'t, T: Real> Var<'t, T> {
     /// The same values with the gradient cut.
     pub fn stop_gradient(self) -> Self {
         self.tape
-            .record_detached(Op::Map(MapKind::Identity, [T::zero(); 2]), self.len(), &[self.id])
+            .record_detached(Op::Map(MapKind::Identity, [T::zero(); 2]), self.len(), &[self])
     }
     /// `x * x`.
     pub fn square(self) -> Self {

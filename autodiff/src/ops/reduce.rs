@@ -10,7 +10,7 @@ use crate::tape::{Op, Var};
 impl<'t, T: Real> Var<'t, T> {
     /// Sum of all elements (length 1). Adjoint: the output's adjoint, broadcast.
     pub fn sum(self) -> Self {
-        self.tape.record(Op::Sum, 1, &[self.id])
+        self.tape.record(Op::Sum, 1, &[self])
     }
 
     /// Mean of all elements (length 1).
@@ -40,7 +40,7 @@ impl<'t, T: Real> Var<'t, T> {
             stride: channels as u32,
             offset: channel as u32,
         };
-        self.tape.record(op, indices.len(), &[self.id, indices.id])
+        self.tape.record(op, indices.len(), &[self, indices])
     }
 
     /// `out[indices[i]] += self[i]` into `len` zeros. Adjoint: gather of the
@@ -56,7 +56,7 @@ impl<'t, T: Real> Var<'t, T> {
         );
         assert!(len > 0, "scatter_add: the output needs at least one element");
         check_addressable::<T>(len, "scatter_add");
-        self.tape.record(Op::ScatterAdd, len, &[self.id, indices.id])
+        self.tape.record(Op::ScatterAdd, len, &[self, indices])
     }
 
     /// Sums the elements of each segment: `out[s] = sum of self[i] with

@@ -13,7 +13,7 @@ impl<'t, T: Real> Var<'t, T> {
             self.len()
         );
         self.tape
-            .record(Op::Map(MapKind::Identity, [T::zero(); 2]), len, &[self.id])
+            .record(Op::Map(MapKind::Identity, [T::zero(); 2]), len, &[self])
     }
 
     /// Elements `start..start + len`.
@@ -24,7 +24,7 @@ impl<'t, T: Real> Var<'t, T> {
             start + len,
             self.len()
         );
-        self.tape.record(Op::Slice(start as u32), len, &[self.id])
+        self.tape.record(Op::Slice(start as u32), len, &[self])
     }
 }
 
@@ -37,6 +37,6 @@ impl<T: Real> Tape<T> {
             assert!(std::ptr::eq(p.tape, self), "concat: operands live on different tapes");
             len += p.len();
         }
-        self.record_iter(Op::Concat, len, parts.iter().map(|p| p.id))
+        self.record_iter(Op::Concat, len, parts.iter().copied())
     }
 }
