@@ -6,7 +6,11 @@
 //! folders written atomically, the probe catalogue, and (landing next) the
 //! declarative objective, the estimation, evaluation and the `alp` CLI.
 
+pub mod estimate;
+pub mod eval;
 pub mod output;
 pub mod probes;
+pub mod relight;
+pub mod synth;
 
 pub use render::{RenderError, Result};

@@ -3,6 +3,8 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use alp::relight::RelightSettings;
+use alp::synth::SynthSettings;
 use clap::{Parser, Subcommand};
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
@@ -21,8 +23,16 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Estimate the lighting and the probe's pose from a photo (the main job).
+    Estimate(alp::estimate::cli::EstimateArgs),
     /// Render a probe at a pose under an environment map (linear EXR plus a PNG preview).
     Render(RenderArgs),
+    /// Render the evaluation's mirror, shiny and diffuse spheres under an env map (768x256 EXR, left to right).
+    Relight(RelightArgs),
+    /// Relighting errors of an estimated env map (and pose errors of an estimated pose) against a scene's truth.
+    Eval(EvalArgs),
+    /// Make a synthetic evaluation scene: a probe at a random pose, random camera, known lighting.
+    Synth(SynthArgs),
     /// Procedural probes.
     Probe {
         #[command(subcommand)]
@@ -58,6 +68,78 @@ struct RenderArgs {
     seed: u64,
 }
 
+#[derive(clap::Args)]
+struct RelightArgs {
+    /// Environment map (equirectangular linear EXR, width = 2 x height).
+    #[arg(long)]
+    env: PathBuf,
+    /// camera.json: the spheres are seen along its viewing direction, with its `up`.
+    #[arg(long)]
+    camera: PathBuf,
+    /// Output image (linear EXR; mirror, shiny, diffuse left to right); a PNG preview is written beside it.
+    #[arg(long)]
+    out: PathBuf,
+    /// Samples per pixel, a square (n x n stratified sub-pixel positions and BRDF samples).
+    #[arg(long, default_value_t = alp::relight::DEFAULT_SPP)]
+    spp: u32,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(clap::Args)]
+struct EvalArgs {
+    /// Scene folder (camera.json, gt_env.exr, and pose.json when --pose is given).
+    #[arg(long)]
+    scene: PathBuf,
+    /// The estimated environment map.
+    #[arg(long)]
+    env: PathBuf,
+    /// An estimated pose.json, compared with the scene's pose.json.
+    #[arg(long)]
+    pose: Option<PathBuf>,
+    /// Samples per pixel of the relit spheres, a square.
+    #[arg(long, default_value_t = alp::relight::DEFAULT_SPP)]
+    spp: u32,
+    /// Random seed (both maps are relit with the same random numbers).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(clap::Args)]
+struct SynthArgs {
+    /// Probe folder (probe.json), or a procedural probe name (can, cap, sphere).
+    #[arg(long)]
+    probe: PathBuf,
+    /// Environment map lighting the scene (written to the scene as gt_env.exr).
+    #[arg(long)]
+    env: PathBuf,
+    /// The scene folder to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Seed of every random choice (camera, pose, render, noise).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Relative standard deviation of multiplicative Gaussian noise.
+    #[arg(long, default_value_t = 0.0)]
+    noise: f32,
+    /// Clamp radiance above this value (sensor saturation); default: no clipping.
+    #[arg(long)]
+    exposure_clip: Option<f32>,
+    /// Samples per pixel of the render.
+    #[arg(long, default_value_t = 256)]
+    spp: u32,
+    /// Tilt the probe up to ~60 degrees or lay it on its side (default: upright, random turn).
+    #[arg(long)]
+    tilted: bool,
+    /// Image width, pixels.
+    #[arg(long, default_value_t = 640)]
+    width: u32,
+    /// Image height, pixels.
+    #[arg(long, default_value_t = 480)]
+    height: u32,
+}
+
 #[derive(Subcommand)]
 enum ProbeAction {
     /// Write a procedural probe folder.
@@ -73,7 +155,11 @@ enum ProbeAction {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Estimate(args) => alp::estimate::cli::run(&args),
         Command::Render(args) => render(&args),
+        Command::Relight(args) => relight(&args),
+        Command::Eval(args) => eval(&args),
+        Command::Synth(args) => synth(&args),
         Command::Probe {
             action: ProbeAction::Make { kind, out },
         } => make_probe(&kind, &out),
@@ -109,6 +195,54 @@ fn render(args: &RenderArgs) -> Result<()> {
         mask.write_png(path)?;
     }
     Ok(())
+}
+
+fn relight(args: &RelightArgs) -> Result<()> {
+    let env = EnvMap::read(&args.env)?;
+    let camera = Camera::read(&args.camera)?;
+    let settings = RelightSettings {
+        spp: args.spp,
+        seed: args.seed,
+    };
+    let spheres = alp::relight::relight(&env, &camera, &settings)?;
+    let image = spheres.side_by_side();
+    image.write_exr(&args.out)?;
+    image.write_png_preview(preview_path(&args.out), 0.0)
+}
+
+fn eval(args: &EvalArgs) -> Result<()> {
+    let env = EnvMap::read(&args.env)?;
+    let pose = args.pose.as_ref().map(Pose::read).transpose()?;
+    let settings = RelightSettings {
+        spp: args.spp,
+        seed: args.seed,
+    };
+    let report = alp::eval::evaluate_scene(&args.scene, &env, pose.as_ref(), &settings)?;
+    println!("{}", report.to_json_line());
+    Ok(())
+}
+
+fn synth(args: &SynthArgs) -> Result<()> {
+    let probe = alp::probes::load(&args.probe)?;
+    let env = EnvMap::read(&args.env)?;
+    let settings = SynthSettings {
+        seed: args.seed,
+        noise: args.noise,
+        exposure_clip: args.exposure_clip,
+        spp: args.spp,
+        tilted: args.tilted,
+        width: args.width,
+        height: args.height,
+    };
+    let scene = alp::synth::synthesize(&probe, &env, &settings)?;
+    if scene.mask.count() == 0 {
+        return Err(RenderError::value(
+            "--probe",
+            "the probe is not visible in the synthetic view",
+        ));
+    }
+    let reference = alp::synth::probe_reference(&args.probe, &args.out)?;
+    alp::synth::write_scene(&args.out, &scene, &env, &reference)
 }
 
 /// `image.exr` -> `image.png`.

@@ -276,22 +276,41 @@ impl<'t, T: Real> Recip for Var<'t, T> {
     }
 }
 
-/// Renders the probe's radiance into the pixels of `hits`: one array per
-/// channel, aligned with `hits.pixels`, averaged over the pixel's `spp`
-/// samples (a partly covered pixel sums only its probe samples: the
-/// background is black).
-#[allow(clippy::too_many_arguments)]
-pub fn shade<'t, T: Real>(
+/// Where each hit sample reads the environment, and what it passes on: the
+/// image is `sum over samples of throughput * L_env(wi)` per pixel, linear
+/// in the environment map (the lighting solve uses this form directly).
+#[derive(Clone, Copy, Debug)]
+pub struct LightSamples<'t, T: Real> {
+    /// World direction of the BRDF sample (towards the light).
+    pub wi: Vec3Var<'t, T>,
+    /// `visibility * f cos / pdf / spp`, RGB.
+    pub throughput: [Var<'t, T>; 3],
+    /// The sample's position in `hits.pixels`.
+    pub segment: Var<'t, T>,
+    /// Number of pixels (segments).
+    pub pixels: usize,
+}
+
+impl<'t, T: Real> LightSamples<'t, T> {
+    /// The pixels' radiance under `env`, one array per channel aligned with `hits.pixels`.
+    pub fn radiance(&self, env: &ImageVars<'t, T>) -> [Var<'t, T>; 3] {
+        let l = env.env_radiance(self.wi);
+        std::array::from_fn(|c| (self.throughput[c] * l[c]).segmented_sum(self.segment, self.pixels))
+    }
+}
+
+/// The light samples of every hit: the hit point on the (moving) triangle,
+/// its material, one BRDF sample.
+pub fn light_samples<'t, T: Real>(
     tape: &'t Tape<T>,
     hits: &PrimaryHits,
     camera: &Camera,
     probe: &ProbeVars<'t, T>,
     posed: &PosedMesh<'t, T>,
     triangles: &[[u32; 3]],
-    env: &ImageVars<'t, T>,
     bsdf: &dyn Bsdf<T>,
-) -> [Var<'t, T>; 3] {
-    assert!(!hits.is_empty(), "shade: no sample sees the probe");
+) -> LightSamples<'t, T> {
+    assert!(!hits.is_empty(), "light_samples: no sample sees the probe");
     let s = SampleVars::new(tape, hits, triangles);
     let origin = Vec3Var::constant(
         tape,
@@ -327,9 +346,31 @@ pub fn shade<'t, T: Real>(
     let visibility = probe.visibility.lookup(u, v)[0];
     let sample = bsdf.sample(&surface, wo, s.random);
     let wi = ts.scale(sample.wi.x) + tt.scale(sample.wi.y) + n.scale(sample.wi.z);
-    let radiance = env.env_radiance(wi);
     let scale = visibility * inv_spp;
-    std::array::from_fn(|c| (sample.weight[c] * radiance[c] * scale).segmented_sum(s.segment, hits.pixels.len()))
+    LightSamples {
+        wi,
+        throughput: sample.weight.map(|w| w * scale),
+        segment: s.segment,
+        pixels: hits.pixels.len(),
+    }
+}
+
+/// Renders the probe's radiance into the pixels of `hits`: one array per
+/// channel, aligned with `hits.pixels`, averaged over the pixel's `spp`
+/// samples (a partly covered pixel sums only its probe samples: the
+/// background is black).
+#[allow(clippy::too_many_arguments)]
+pub fn shade<'t, T: Real>(
+    tape: &'t Tape<T>,
+    hits: &PrimaryHits,
+    camera: &Camera,
+    probe: &ProbeVars<'t, T>,
+    posed: &PosedMesh<'t, T>,
+    triangles: &[[u32; 3]],
+    env: &ImageVars<'t, T>,
+    bsdf: &dyn Bsdf<T>,
+) -> [Var<'t, T>; 3] {
+    light_samples(tape, hits, camera, probe, posed, triangles, bsdf).radiance(env)
 }
 
 /// Renders the probe at `pose` under `env` (f32, no gradients): the image

@@ -1,0 +1,136 @@
+//! `alp estimate`: the main job, from files to an output folder.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use render::camera::Camera;
+use render::image_io::{Mask, RgbImage};
+use render::{RenderError, Result};
+
+use super::{Photo, Quality, Settings, estimate};
+
+/// Flags of `alp estimate`.
+#[derive(clap::Args, Debug)]
+pub struct EstimateArgs {
+    /// The photo: linear HDR RGB EXR.
+    #[arg(long)]
+    pub image: PathBuf,
+    /// The probe's mask: 8-bit PNG, > 127 marks the probe.
+    #[arg(long)]
+    pub mask: PathBuf,
+    /// camera.json of the photo.
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Probe folder (probe.json), or a procedural probe name (can, cap, sphere).
+    #[arg(long)]
+    pub probe: PathBuf,
+    /// Output folder (written whole or not at all).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// fast, default or best.
+    #[arg(long, default_value = "default")]
+    pub quality: String,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Output env map size, WIDTHxHEIGHT (2:1).
+    #[arg(long, default_value = "256x128")]
+    pub env_size: String,
+}
+
+fn parse_quality(q: &str) -> Result<Quality> {
+    match q {
+        "fast" => Ok(Quality::Fast),
+        "default" => Ok(Quality::Default),
+        "best" => Ok(Quality::Best),
+        other => Err(RenderError::value(
+            "--quality",
+            format!("`{other}` is not one of fast, default, best"),
+        )),
+    }
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize)> {
+    let bad = || {
+        RenderError::value(
+            "--env-size",
+            format!("`{s}` is not WIDTHxHEIGHT with WIDTH = 2 x HEIGHT"),
+        )
+    };
+    let (w, h) = s.split_once('x').ok_or_else(bad)?;
+    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+    if w != 2 * h || h < 2 {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+/// Runs the estimation and writes `env.exr`, `pose.json`, `confidence.exr`,
+/// `rerender.exr`, `preview.png` and `report.json` into `--out`.
+pub fn run(args: &EstimateArgs) -> Result<()> {
+    let mut settings = Settings::new(parse_quality(&args.quality)?);
+    settings.seed = args.seed;
+    settings.env_size = parse_size(&args.env_size)?;
+    if args.threads == Some(0) {
+        return Err(RenderError::value("--threads", "needs at least one thread"));
+    }
+    let camera = Camera::read(&args.camera)?;
+    let image = RgbImage::read_exr(&args.image)?;
+    let mask = Mask::read_png(&args.mask)?;
+    let photo = Photo::new(image, mask, camera).map_err(|e| e.in_file(&args.image))?;
+    let probe = crate::probes::load(&args.probe)?;
+    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| RenderError::value("--threads", e.to_string()))?;
+    let verbose = std::io::stderr().is_terminal();
+    if verbose {
+        eprintln!(
+            "alp estimate: {} starts, quality {}",
+            settings.starts_deg.len(),
+            args.quality
+        );
+    }
+    let result = pool.install(|| estimate(&photo, &probe, &settings))?;
+    if verbose {
+        for p in &result.report.phases {
+            eprintln!("  {:<15} {:>4} evals {:>7.2} s", p.name, p.evaluations, p.wall_s);
+        }
+        eprintln!("  PSNR {:.2} dB, {:.2} s", result.report.psnr_db, result.report.wall_s);
+    }
+    crate::output::write_folder_atomically(&args.out, |dir| {
+        result.env.write(dir.join("env.exr"))?;
+        result.pose.write(dir.join("pose.json"))?;
+        result.confidence.write(dir.join("confidence.exr"))?;
+        result.rerender.write_exr(dir.join("rerender.exr"))?;
+        preview(&photo.image, &result.rerender, &result.env.to_image())
+            .write_png_preview(dir.join("preview.png"), 0.0)?;
+        let json = serde_json::to_string_pretty(&result.report)
+            .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
+        std::fs::write(dir.join("report.json"), json + "\n")
+            .map_err(|e| RenderError::io(dir.join("report.json"), "write", e))
+    })
+}
+
+/// Photo, re-render and env map side by side (the map scaled to the photo's height).
+fn preview(photo: &RgbImage, rerender: &RgbImage, env: &RgbImage) -> RgbImage {
+    let h = photo.height;
+    let env_w = 2 * h;
+    let width = 2 * photo.width + env_w;
+    let mut out = RgbImage::filled(width, h, [0.0; 3]);
+    for r in 0..h {
+        for c in 0..photo.width {
+            out.pixels[r * width + c] = photo.pixels[r * photo.width + c];
+            out.pixels[r * width + photo.width + c] = rerender.pixels[r * photo.width + c];
+        }
+        for c in 0..env_w {
+            let (er, ec) = (r * env.height / h, c * env.width / env_w);
+            out.pixels[r * width + 2 * photo.width + c] = env.pixels[er * env.width + ec];
+        }
+    }
+    out
+}

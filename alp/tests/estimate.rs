@@ -1,0 +1,93 @@
+//! The main job end to end on a small synthetic photo: it must find the
+//! probe where it is and explain the photo; bad inputs are clear errors.
+
+use alp::estimate::{Photo, Quality, Settings, estimate};
+use glam::{Quat, Vec3};
+use render::bsdf::GgxMetal;
+use render::camera::Camera;
+use render::envmap::EnvMap;
+use render::image_io::Mask;
+use render::integrator::{RenderSettings, render_image};
+use render::pose::Pose;
+use render::procedural::SodaCan;
+
+fn scene() -> (render::probe::ProbeAsset, Pose, Camera, EnvMap) {
+    let probe = SodaCan::default().build();
+    let camera = Camera::new(
+        160,
+        120,
+        40.0,
+        Vec3::new(0.0, 0.12, 0.3),
+        Vec3::new(0.0, 0.06, 0.0),
+        Vec3::Y,
+    )
+    .expect("camera");
+    let pose = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::new(0.01, 0.0, 0.0));
+    let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
+    let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
+    (probe, pose, camera, env)
+}
+
+#[test]
+fn finds_the_probe_and_explains_the_photo() {
+    let (probe, truth, camera, env) = scene();
+    let (image, mask) = render_image(
+        &probe,
+        &truth,
+        &camera,
+        &env,
+        &GgxMetal,
+        &RenderSettings { spp: 16, seed: 1 },
+    );
+    let photo = Photo::new(image, mask, camera).expect("a valid photo");
+    let mut settings = Settings::new(Quality::Fast);
+    settings.env_size = (64, 32);
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    assert_eq!((result.env.width(), result.env.height()), (64, 32));
+    let centre = Vec3::new(0.0, 0.061, 0.0);
+    let err = (result.pose.transform_point(centre) - truth.transform_point(centre)).length();
+    assert!(err < 0.01, "probe centre off by {err} m");
+    let axis = (result.pose.rotation * Vec3::Y).dot(truth.rotation * Vec3::Y);
+    assert!(axis > 0.99, "probe axis off by {} degrees", axis.acos().to_degrees());
+    assert!(
+        result.report.psnr_db > 18.0,
+        "re-render PSNR {} dB",
+        result.report.psnr_db
+    );
+    assert!(
+        result
+            .env
+            .radiance()
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && *v >= 0.0)
+    );
+}
+
+#[test]
+fn bad_photos_are_clear_errors() {
+    let (probe, truth, camera, env) = scene();
+    let (image, mask) = render_image(
+        &probe,
+        &truth,
+        &camera,
+        &env,
+        &GgxMetal,
+        &RenderSettings { spp: 1, seed: 1 },
+    );
+    let empty = Mask::new(160, 120, vec![false; 160 * 120]);
+    let err = Photo::new(image.clone(), empty, camera.clone())
+        .err()
+        .expect("an empty mask is refused");
+    assert!(err.to_string().contains("mask"), "{err}");
+    let small = Mask::new(80, 60, vec![true; 80 * 60]);
+    let err = Photo::new(image.clone(), small, camera.clone())
+        .err()
+        .expect("a mask of another size is refused");
+    assert!(err.to_string().contains("80x60"), "{err}");
+    let mut nan = image;
+    nan.pixels[5][1] = f32::NAN;
+    let err = Photo::new(nan, mask, camera).err().expect("NaN is refused");
+    assert!(err.to_string().contains("NaN"), "{err}");
+    let _ = probe;
+}

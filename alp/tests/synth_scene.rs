@@ -1,0 +1,187 @@
+//! `alp synth` writes a complete scene folder that `alp eval` reads, and both fail clearly on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use render::envmap::EnvMap;
+use render::image_io::{Mask, RgbImage};
+
+fn alp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_alp"))
+        .args(args)
+        .output()
+        .expect("run alp")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fresh folder for one test, holding the courtyard map box-filtered to 32 rows (fast to relight).
+fn workspace(name: &str) -> (PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("alp-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let courtyard = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
+    let env = dir.join("env.exr");
+    EnvMap::read(courtyard)
+        .expect("courtyard")
+        .downsample(32)
+        .write(&env)
+        .expect("write env");
+    (dir, env)
+}
+
+fn synth(env: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["synth", "--probe", "can", "--env"];
+    args.push(env.to_str().expect("utf-8"));
+    args.extend(["--out", out.to_str().expect("utf-8")]);
+    args.extend(["--width", "96", "--height", "72", "--spp", "8"]);
+    args.extend(extra);
+    alp(&args)
+}
+
+#[test]
+fn synth_writes_a_scene_that_eval_reads() {
+    let (dir, env) = workspace("synth-eval");
+    let scene = dir.join("scene");
+    let out = synth(&env, &scene, &["--seed", "3", "--tilted", "--noise", "0.02"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for file in [
+        "image.exr",
+        "mask.png",
+        "camera.json",
+        "probe.txt",
+        "gt_env.exr",
+        "pose.json",
+    ] {
+        assert!(scene.join(file).is_file(), "missing {file}");
+    }
+    assert_eq!(
+        std::fs::read_to_string(scene.join("probe.txt"))
+            .expect("probe.txt")
+            .trim(),
+        "can"
+    );
+
+    // The mask is the coverage: every mask pixel is lit, and lit pixels outside it are edge pixels.
+    let image = RgbImage::read_exr(scene.join("image.exr")).expect("image");
+    let mask = Mask::read_png(scene.join("mask.png")).expect("mask");
+    assert_eq!((image.width, image.height, mask.width, mask.height), (96, 72, 96, 72));
+    let (w, h) = (96i64, 72i64);
+    let lit = |p: usize| image.pixels[p].iter().any(|&v| v > 0.0);
+    let inside = |r: i64, c: i64| r >= 0 && c >= 0 && r < h && c < w && mask.inside[(r * w + c) as usize];
+    let count = mask.count();
+    assert!(count > 50, "the probe covers {count} pixels");
+    for p in 0..(w * h) as usize {
+        let (r, c) = (p as i64 / w, p as i64 % w);
+        if mask.inside[p] {
+            assert!(lit(p), "mask pixel ({r}, {c}) is black");
+        } else if lit(p) {
+            let near = (-1..=1).any(|dr| (-1..=1).any(|dc| inside(r + dr, c + dc)));
+            assert!(near, "lit pixel ({r}, {c}) is away from the mask");
+        }
+    }
+    // Reproducible from the seed.
+    let again = dir.join("again");
+    assert!(
+        synth(&env, &again, &["--seed", "3", "--tilted", "--noise", "0.02"])
+            .status
+            .success()
+    );
+    for file in ["camera.json", "pose.json", "image.exr"] {
+        let read = |d: &Path| std::fs::read(d.join(file)).expect("read");
+        assert_eq!(read(&scene), read(&again), "{file} differs between runs of one seed");
+    }
+
+    // The truth against itself: no error.
+    let scene_arg = scene.to_str().expect("utf-8");
+    let gt = scene.join("gt_env.exr");
+    let pose = scene.join("pose.json");
+    let out = alp(&[
+        "eval",
+        "--scene",
+        scene_arg,
+        "--env",
+        gt.to_str().expect("utf-8"),
+        "--pose",
+        pose.to_str().expect("utf-8"),
+        "--spp",
+        "16",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let line = String::from_utf8(out.stdout).expect("utf-8");
+    assert_eq!(line.lines().count(), 1, "{line}");
+    let report: serde_json::Value = serde_json::from_str(&line).expect("JSON");
+    assert_eq!(report["scene"], scene_arg);
+    for sphere in ["mirror", "shiny", "diffuse"] {
+        assert_eq!(report[sphere]["angular_deg"], 0.0, "{line}");
+        assert_eq!(report[sphere]["si_rmse"], 0.0, "{line}");
+    }
+    for field in ["rotation_deg", "axis_deg", "translation_mm"] {
+        assert!(report[field].as_f64().expect(field).abs() < 1e-3, "{line}");
+    }
+    assert!((report["scale_ratio"].as_f64().expect("scale_ratio") - 1.0).abs() < 1e-6);
+
+    // A blurrier estimate scores worse than zero; without --pose there are no pose fields.
+    let blurry = dir.join("blurry.exr");
+    EnvMap::read(&gt)
+        .expect("gt")
+        .downsample(4)
+        .write(&blurry)
+        .expect("write");
+    let out = alp(&[
+        "eval",
+        "--scene",
+        scene_arg,
+        "--env",
+        blurry.to_str().expect("utf-8"),
+        "--spp",
+        "16",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(
+        report["mirror"]["angular_deg"].as_f64().expect("mirror") > 1.0,
+        "{report}"
+    );
+    assert!(report.get("rotation_deg").is_none(), "{report}");
+
+    // A scene without its truth is an error naming the missing file.
+    std::fs::remove_file(&gt).expect("remove gt_env.exr");
+    let out = alp(&[
+        "eval",
+        "--scene",
+        scene_arg,
+        "--env",
+        blurry.to_str().expect("utf-8"),
+        "--spp",
+        "16",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("gt_env.exr"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn synth_rejects_an_unknown_probe_and_writes_nothing() {
+    let (dir, env) = workspace("synth-bad-probe");
+    let scene = dir.join("scene");
+    let out = alp(&[
+        "synth",
+        "--probe",
+        "no_such_probe",
+        "--env",
+        env.to_str().expect("utf-8"),
+        "--out",
+        scene.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("no_such_probe"), "{}", stderr(&out));
+    assert!(!scene.exists());
+    // A bad env map is named too.
+    let out = synth(&dir.join("missing.exr"), &scene, &[]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("missing.exr"), "{}", stderr(&out));
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
