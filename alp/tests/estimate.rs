@@ -76,12 +76,12 @@ fn bad_photos_are_clear_errors() {
         &RenderSettings { spp: 1, seed: 1 },
     );
     let empty = Mask::new(160, 120, vec![false; 160 * 120]);
-    let err = Photo::new(image.clone(), empty, camera.clone())
+    let err = Photo::new(image.clone(), empty, camera)
         .err()
         .expect("an empty mask is refused");
     assert!(err.to_string().contains("mask"), "{err}");
     let small = Mask::new(80, 60, vec![true; 80 * 60]);
-    let err = Photo::new(image.clone(), small, camera.clone())
+    let err = Photo::new(image.clone(), small, camera)
         .err()
         .expect("a mask of another size is refused");
     assert!(err.to_string().contains("80x60"), "{err}");
