@@ -423,7 +423,7 @@ fn silhouette_loss<'t>(
     pose_vars: &PoseVars<'t, f64>,
     q_ref: Quat,
     prior: f64,
-    terms: &mut std::collections::BTreeMap<String, f64>,
+    terms: &mut Terms,
 ) -> Result<autodiff::Var<'t, f64>> {
     let mesh = render::posed::MeshVars::new(tape, &probe.asset.mesh);
     let posed = PosedMesh::new(&mesh, pose_vars);
@@ -459,40 +459,29 @@ fn silhouette_loss<'t>(
     Ok(loss)
 }
 
-/// The silhouette phase from one start: returns the pose, the final loss and the report.
-fn fit_silhouette(
-    probe: &Probe,
-    photo: &Photo,
-    reference: &ReferenceMask,
-    start: Pose,
-    q_ref: Quat,
-    iters: usize,
-    depth: f32,
-) -> Result<(Pose, f64, PhaseReport)> {
+/// The loss terms a phase reports, by name.
+type Terms = std::collections::BTreeMap<String, f64>;
+
+/// Adam over the pose parameters from `start`: each evaluation records the
+/// loss with `loss(tape, pose, evaluation, terms)` on a fresh f64 tape. A
+/// failed evaluation (the probe left the view) ends the phase with its error.
+fn fit_pose<L>(name: &str, start: Pose, iters: usize, depth: f32, mut loss: L) -> Result<(Pose, f64, PhaseReport)>
+where
+    L: for<'t> FnMut(&'t Tape<f64>, &PoseVars<'t, f64>, usize, &mut Terms) -> Result<autodiff::Var<'t, f64>>,
+{
     let t0 = Instant::now();
     let mut adam = pose_adam(iters, depth)?;
-    let mut evals = 0usize;
-    let mut failure = None;
-    let mut terms = std::collections::BTreeMap::new();
+    let (mut evals, mut failure, mut terms) = (0usize, None, Terms::new());
     let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
-        let prior = 1.0 - evals as f64 / iters.max(1) as f64;
-        evals += 1;
         let tape = Tape::<f64>::new();
         let pose_vars = PoseVars::new(&tape, x, true);
-        match silhouette_loss(
-            &tape,
-            probe,
-            photo,
-            reference,
-            &pose_vars,
-            q_ref,
-            prior.max(0.0),
-            &mut terms,
-        ) {
-            Ok(loss) => {
-                tape.backward(loss);
+        let result = loss(&tape, &pose_vars, evals, &mut terms);
+        evals += 1;
+        match result {
+            Ok(l) => {
+                tape.backward(l);
                 g.copy_from_slice(&tape.grad(pose_vars.params));
-                tape.item(loss)
+                tape.item(l)
             }
             Err(e) => {
                 failure = Some(e);
@@ -503,12 +492,12 @@ fn fit_silhouette(
     };
     let state = adam
         .minimize(&mut objective, pack_pose(&start).to_vec())
-        .map_err(|e| RenderError::value("silhouette phase", e.to_string()))?;
+        .map_err(|e| RenderError::value(format!("{name} phase"), e.to_string()))?;
     if state.best_value.is_nan() {
-        return Err(failure.unwrap_or_else(|| RenderError::value("silhouette phase", "no finite loss")));
+        return Err(failure.unwrap_or_else(|| RenderError::value(format!("{name} phase"), "no finite loss")));
     }
     let report = PhaseReport {
-        name: "silhouette".into(),
+        name: name.into(),
         iterations: state.iter,
         evaluations: state.evals,
         wall_s: t0.elapsed().as_secs_f64(),
@@ -516,6 +505,22 @@ fn fit_silhouette(
         psnr_db: None,
     };
     Ok((unpack_pose(&state.best_x), state.best_value, report))
+}
+
+/// The silhouette phase from one start: returns the pose, the final loss and the report.
+fn fit_silhouette(
+    probe: &Probe,
+    photo: &Photo,
+    reference: &ReferenceMask,
+    start: Pose,
+    q_ref: Quat,
+    iters: usize,
+    depth: f32,
+) -> Result<(Pose, f64, PhaseReport)> {
+    fit_pose("silhouette", start, iters, depth, |tape, pose_vars, eval, terms| {
+        let prior = (1.0 - eval as f64 / iters.max(1) as f64).max(0.0);
+        silhouette_loss(tape, probe, photo, reference, pose_vars, q_ref, prior, terms)
+    })
 }
 
 /// The pose by the image loss (relative L1 in the mask) plus the mask
@@ -532,12 +537,7 @@ fn fit_pose_to_image(
     depth: f32,
     seed: u64,
 ) -> Result<(Pose, PhaseReport)> {
-    let t0 = Instant::now();
-    let mut adam = pose_adam(settings.pose_iters, depth)?;
-    let mut evals = 0usize;
-    let mut terms = std::collections::BTreeMap::new();
-    let mut failure = None;
-    // Relative L1 weights: sqrt of the least-squares weights.
+    // Relative L1 weights: square roots of the least-squares weights.
     let target_weight: std::collections::HashMap<u32, f64> = fit
         .hits
         .pixels
@@ -545,89 +545,69 @@ fn fit_pose_to_image(
         .zip(&fit.weight)
         .map(|(&p, &w)| (p, w.sqrt()))
         .collect();
-    let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
-        evals += 1;
-        let tape = Tape::<f64>::new();
-        let pose_vars = PoseVars::new(&tape, x, true);
-        let vars = ProbeVars::new(&tape, probe.asset, false);
-        let posed = PosedMesh::new(&vars.mesh, &pose_vars);
-        let rs = RenderSettings {
-            spp: settings.spp_pose,
-            seed: seed.wrapping_add(evals as u64),
-        };
-        let hits = PrimaryHits::trace(&probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
-        if hits.is_empty() {
-            failure = Some(RenderError::value("pose", "the probe left the camera's view"));
-            g.iter_mut().for_each(|v| *v = 0.0);
-            return f64::NAN;
-        }
-        let env_vars = ImageVars::env(&tape, env, false);
-        let rgb = light_samples(
-            &tape,
-            &hits,
-            &photo.camera,
-            &vars,
-            &posed,
-            &probe.asset.mesh.triangles,
-            &GgxMetal,
-        )
-        .radiance(&env_vars);
-        let weights: Vec<f64> = hits
-            .pixels
-            .iter()
-            .map(|p| target_weight.get(p).copied().unwrap_or(0.0))
-            .collect();
-        let wsum: f64 = weights.iter().sum::<f64>().max(1e-30);
-        let w = tape.constant(&weights);
-        let mut image = None;
-        for (c, channel) in rgb.iter().enumerate() {
-            let target: Vec<f64> = hits
+    let (pose, _, report) = fit_pose(
+        "pose",
+        start,
+        settings.pose_iters,
+        depth,
+        |tape, pose_vars, eval, terms| {
+            let vars = ProbeVars::new(tape, probe.asset, false);
+            let posed = PosedMesh::new(&vars.mesh, pose_vars);
+            let rs = RenderSettings {
+                spp: settings.spp_pose,
+                seed: seed.wrapping_add(eval as u64),
+            };
+            let hits = PrimaryHits::trace(&probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
+            if hits.is_empty() {
+                return Err(RenderError::value("pose", "the probe left the camera's view"));
+            }
+            let env_vars = ImageVars::env(tape, env, false);
+            let rgb = light_samples(
+                tape,
+                &hits,
+                &photo.camera,
+                &vars,
+                &posed,
+                &probe.asset.mesh.triangles,
+                &GgxMetal,
+            )
+            .radiance(&env_vars);
+            let weights: Vec<f64> = hits
                 .pixels
                 .iter()
-                .map(|&p| photo.image.pixels[p as usize][c] as f64)
+                .map(|p| target_weight.get(p).copied().unwrap_or(0.0))
                 .collect();
-            let term = ((*channel - tape.constant(&target)).abs() * w).sum();
-            image = Some(image.map_or(term, |acc| acc + term));
-        }
-        let image = image.expect("three channels") * (1.0 / (3.0 * wsum));
-        let mask = match silhouette_loss(
-            &tape,
-            probe,
-            photo,
-            reference,
-            &pose_vars,
-            Quat::IDENTITY,
-            0.0,
-            &mut terms,
-        ) {
-            Ok(m) => m,
-            Err(e) => {
-                failure = Some(e);
-                g.iter_mut().for_each(|v| *v = 0.0);
-                return f64::NAN;
+            let wsum: f64 = weights.iter().sum::<f64>().max(1e-30);
+            let w = tape.constant(&weights);
+            let mut image = None;
+            for (c, channel) in rgb.iter().enumerate() {
+                let target: Vec<f64> = hits
+                    .pixels
+                    .iter()
+                    .map(|&p| photo.image.pixels[p as usize][c] as f64)
+                    .collect();
+                let term = ((*channel - tape.constant(&target)).abs() * w).sum();
+                image = Some(image.map_or(term, |acc| acc + term));
             }
-        };
-        let loss = image + mask;
-        terms.insert("image_rel_l1".into(), tape.item(image));
-        tape.backward(loss);
-        g.copy_from_slice(&tape.grad(pose_vars.params));
-        tape.item(loss)
-    };
-    let state = adam
-        .minimize(&mut objective, pack_pose(&start).to_vec())
-        .map_err(|e| RenderError::value("pose phase", e.to_string()))?;
-    if state.best_value.is_nan() {
-        return Err(failure.unwrap_or_else(|| RenderError::value("pose phase", "no finite loss")));
+            let image = image.expect("three channels") * (1.0 / (3.0 * wsum));
+            let mask = silhouette_loss(tape, probe, photo, reference, pose_vars, Quat::IDENTITY, 0.0, terms)?;
+            terms.insert("image_rel_l1".into(), tape.item(image));
+            Ok(image + mask)
+        },
+    )?;
+    Ok((pose, report))
+}
+
+/// A lighting solve's account.
+fn lighting_report(name: &str, fit: &LightingFit, started: Instant, psnr_db: f64) -> PhaseReport {
+    PhaseReport {
+        name: name.into(),
+        iterations: 0,
+        evaluations: fit.evaluations,
+        wall_s: started.elapsed().as_secs_f64(),
+        loss: Default::default(),
+        psnr_db: Some(psnr_db),
     }
-    let report = PhaseReport {
-        name: "pose".into(),
-        iterations: state.iter,
-        evaluations: state.evals,
-        wall_s: t0.elapsed().as_secs_f64(),
-        loss: terms,
-        psnr_db: None,
-    };
-    Ok((unpack_pose(&state.best_x), report))
 }
 
 fn env_from_texels(texels: &[f64], width: usize, height: usize) -> Result<EnvMap> {
@@ -697,14 +677,7 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         let coarse = fit_lighting(&probe, photo, &pose, RANKING_SIZE, &quick, &clipped, 1.0, None)?;
         let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
         let fit = fit_lighting(&probe, photo, &pose, work, &quick, &clipped, settings.smoothness, None)?;
-        phases.push(PhaseReport {
-            name: "lighting".into(),
-            iterations: 0,
-            evaluations: fit.evaluations,
-            wall_s: t1.elapsed().as_secs_f64(),
-            loss: Default::default(),
-            psnr_db: Some(score),
-        });
+        phases.push(lighting_report("lighting", &fit, t1, score));
         starts.push(StartReport {
             yaw_deg: yaw,
             silhouette_loss: sil_loss,
@@ -742,14 +715,12 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
             settings.smoothness,
             Some(&fit.env),
         )?;
-        phases.push(PhaseReport {
-            name: "lighting".into(),
-            iterations: 0,
-            evaluations: fit.evaluations,
-            wall_s: t1.elapsed().as_secs_f64(),
-            loss: Default::default(),
-            psnr_db: Some(psnr(&fit.rendered, &fit.target, &fit.weight)),
-        });
+        phases.push(lighting_report(
+            "lighting",
+            &fit,
+            t1,
+            psnr(&fit.rendered, &fit.target, &fit.weight),
+        ));
     }
     let t1 = Instant::now();
     let final_settings = RenderSettings {
@@ -767,14 +738,7 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         Some(&fit.env),
     )?;
     let final_psnr = psnr(&fit.rendered, &fit.target, &fit.weight);
-    phases.push(PhaseReport {
-        name: "lighting_final".into(),
-        iterations: 0,
-        evaluations: fit.evaluations,
-        wall_s: t1.elapsed().as_secs_f64(),
-        loss: Default::default(),
-        psnr_db: Some(final_psnr),
-    });
+    phases.push(lighting_report("lighting_final", &fit, t1, final_psnr));
     let working_env = env_from_texels(&fit.env, work.0, work.1)?;
     let env = resample(&working_env, out_w, out_h)?;
     let confidence = fit.transport.confidence().iter().map(|&c| [c; 3]).collect();
