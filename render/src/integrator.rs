@@ -373,9 +373,14 @@ pub fn shade<'t, T: Real>(
     light_samples(tape, hits, camera, probe, posed, triangles, bsdf).radiance(env)
 }
 
+/// Most samples per pixel one pass of [`render_image`] holds in memory
+/// (every sample's intermediates live on the tape for a pass).
+const SPP_PER_PASS: u32 = 16;
+
 /// Renders the probe at `pose` under `env` (f32, no gradients): the image
 /// (black background) and the hard coverage mask (at least half of a pixel's
-/// samples see the probe).
+/// samples see the probe). High sample counts run in passes of at most
+/// 16 spp (seeds `seed`, `seed + 1`, ...), averaged, so memory stays bounded.
 pub fn render_image(
     probe: &ProbeAsset,
     pose: &Pose,
@@ -384,29 +389,48 @@ pub fn render_image(
     bsdf: &dyn Bsdf<f32>,
     settings: &RenderSettings,
 ) -> (RgbImage, Mask) {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut sum = vec![[0.0f64; 3]; w * h];
+    let mut covered = vec![0.0f64; w * h];
+    let total = settings.spp.max(1);
+    let passes = total.div_ceil(SPP_PER_PASS);
     let tape = Tape::<f32>::new();
     let vars = ProbeVars::new(&tape, probe, false);
     let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
-    let hits = PrimaryHits::trace(&probe.mesh, &posed.position_values(), camera, settings);
-    let (w, h) = (camera.width as usize, camera.height as usize);
-    let mut mask = Mask::new(w, h, vec![false; w * h]);
-    if hits.is_empty() {
-        return (RgbImage::filled(w, h, [0.0; 3]), mask);
-    }
     let env_vars = ImageVars::env(&tape, env, false);
-    let rgb = shade(
-        &tape,
-        &hits,
-        camera,
-        &vars,
-        &posed,
-        &probe.mesh.triangles,
-        &env_vars,
-        bsdf,
-    );
-    let rgb = rgb.map(|c| tape.to_vec(c).iter().map(|&v| v as f64).collect::<Vec<f64>>());
-    for (&p, &c) in hits.pixels.iter().zip(&hits.coverage) {
-        mask.inside[p as usize] = c >= 0.5;
+    let positions = posed.position_values();
+    let mark = tape.mark();
+    for pass in 0..passes {
+        let spp = SPP_PER_PASS.min(total - pass * SPP_PER_PASS);
+        let pass_settings = RenderSettings {
+            spp,
+            seed: settings.seed.wrapping_add(pass as u64),
+        };
+        let hits = PrimaryHits::trace(&probe.mesh, &positions, camera, &pass_settings);
+        if hits.is_empty() {
+            break;
+        }
+        tape.reset_to(mark);
+        let rgb = shade(
+            &tape,
+            &hits,
+            camera,
+            &vars,
+            &posed,
+            &probe.mesh.triangles,
+            &env_vars,
+            bsdf,
+        );
+        let rgb = rgb.map(|c| tape.to_vec(c));
+        let share = spp as f64 / total as f64;
+        for (k, &p) in hits.pixels.iter().enumerate() {
+            for c in 0..3 {
+                sum[p as usize][c] += rgb[c][k] as f64 * share;
+            }
+            covered[p as usize] += hits.coverage[k] as f64 * share;
+        }
     }
-    (hits.to_image([&rgb[0], &rgb[1], &rgb[2]]), mask)
+    let image = RgbImage::new(w, h, sum.iter().map(|p| p.map(|v| v as f32)).collect());
+    let mask = Mask::new(w, h, covered.iter().map(|&c| c >= 0.5).collect());
+    (image, mask)
 }
