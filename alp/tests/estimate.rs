@@ -91,3 +91,22 @@ fn bad_photos_are_clear_errors() {
     assert!(err.to_string().contains("NaN"), "{err}");
     let _ = probe;
 }
+
+#[test]
+fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
+    let (probe, truth, camera, env) = scene();
+    let (image, mask) = render_image(
+        &probe,
+        &truth,
+        &camera,
+        &env,
+        &GgxMetal,
+        &RenderSettings { spp: 16, seed: 1 },
+    );
+    let photo = Photo::new(image, mask, camera).expect("a valid photo");
+    let mut settings = Settings::new(Quality::Fast);
+    settings.env_size = (64, 32);
+    let (map, psnr) = alp::estimate::estimate_lighting(&photo, &probe, &truth, &settings).expect("a map");
+    assert_eq!((map.width(), map.height()), (64, 32));
+    assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");
+}

@@ -109,7 +109,7 @@ impl Settings {
             spp_pose,
             spp_final,
             working_height: None,
-            smoothness: 1e-2,
+            smoothness: 1e-4,
         }
     }
 }
@@ -221,6 +221,12 @@ pub struct Estimate {
     /// The account of the run.
     pub report: Report,
 }
+
+/// Smoothness of the lighting while the pose is still searched: a detailed
+/// map would explain a misplaced texture away (texture baked into the light)
+/// and hide the pose error from the image loss. The final solve uses the
+/// settings' (weaker) smoothness.
+const POSE_SEARCH_SMOOTHNESS: f64 = 1e-2;
 
 /// The env map size the orientation starts are ranked under.
 const RANKING_SIZE: (usize, usize) = (16, 8);
@@ -676,7 +682,16 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         // explain away (texture baked into the light).
         let coarse = fit_lighting(&probe, photo, &pose, RANKING_SIZE, &quick, &clipped, 1.0, None)?;
         let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
-        let fit = fit_lighting(&probe, photo, &pose, work, &quick, &clipped, settings.smoothness, None)?;
+        let fit = fit_lighting(
+            &probe,
+            photo,
+            &pose,
+            work,
+            &quick,
+            &clipped,
+            POSE_SEARCH_SMOOTHNESS,
+            None,
+        )?;
         phases.push(lighting_report("lighting", &fit, t1, score));
         starts.push(StartReport {
             yaw_deg: yaw,
@@ -712,7 +727,7 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
             work,
             &quick,
             &clipped,
-            settings.smoothness,
+            POSE_SEARCH_SMOOTHNESS,
             Some(&fit.env),
         )?;
         phases.push(lighting_report(
@@ -763,4 +778,37 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         rerender,
         report,
     })
+}
+
+/// The lighting alone at a known pose (the lighting phase of [`estimate`]
+/// without the pose search): the map at the output size and the
+/// re-rendering PSNR.
+pub fn estimate_lighting(photo: &Photo, asset: &ProbeAsset, pose: &Pose, settings: &Settings) -> Result<(EnvMap, f64)> {
+    let probe = Probe {
+        asset,
+        edges: EdgeAdjacency::new(&asset.mesh),
+    };
+    let clipped = clipped_pixels(photo);
+    let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
+    let work_h = settings.working_height.unwrap_or_else(|| working_height(min_roughness));
+    let rs = RenderSettings {
+        spp: settings.spp_final,
+        seed: settings.seed,
+    };
+    let fit = fit_lighting(
+        &probe,
+        photo,
+        pose,
+        (2 * work_h, work_h),
+        &rs,
+        &clipped,
+        settings.smoothness,
+        None,
+    )?;
+    let env = resample(
+        &env_from_texels(&fit.env, 2 * work_h, work_h)?,
+        settings.env_size.0,
+        settings.env_size.1,
+    )?;
+    Ok((env, psnr(&fit.rendered, &fit.target, &fit.weight)))
 }
