@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde_json::{Value, json};
 
 /// Times `f` warm: one call excluded, then repeated for about half a second.
-fn time<R>(mut f: impl FnMut() -> R) -> (f64, f64, usize, R) {
+fn time<R>(mut f: impl FnMut() -> R) -> ((f64, f64, usize), R) {
     let mut out = f();
     let mut times = Vec::new();
     let start = Instant::now();
@@ -22,23 +22,18 @@ fn time<R>(mut f: impl FnMut() -> R) -> (f64, f64, usize, R) {
         times.push(t.elapsed().as_secs_f64());
     }
     times.sort_by(f64::total_cmp);
-    (times[times.len() / 2], times[0], times.len(), out)
+    ((times[times.len() / 2], times[0], times.len()), out)
 }
 
-/// What was measured: workload, implementation, mode, size field and value.
-struct Case<'a> {
-    bench: &'a str,
-    imp: &'a str,
-    mode: &'a str,
-    size: (&'a str, usize),
-}
+/// What was measured: workload, implementation, mode, and the size's field name and value.
+type Case<'a> = (&'a str, &'a str, &'a str, (&'a str, usize));
 
-fn report(case: Case, threads: usize, timing: (f64, f64, usize), check: Value, ok: bool) {
+fn report((bench, imp, mode, size): Case, threads: usize, timing: (f64, f64, usize), (check, ok): (Value, bool)) {
     let mut line = json!({
-        "bench": case.bench, "impl": case.imp, "mode": case.mode, "threads": threads,
+        "bench": bench, "impl": imp, "mode": mode, "threads": threads,
         "median_s": timing.0, "min_s": timing.1, "runs": timing.2, "check": check, "check_ok": ok,
     });
-    line[case.size.0] = json!(case.size.1);
+    line[size.0] = json!(size.1);
     println!("{line}");
     if !ok {
         eprintln!("CHECK FAILED: {line}");
@@ -205,38 +200,24 @@ fn elementwise_chain(n: usize, threads: usize) {
         let tape = Tape::<f32>::new();
         let xid = tape.leaf(&x).id();
         let mark = tape.mark();
-        let (med, min, runs, (y, grad)) = time(|| {
+        let (timing, (y, grad)) = time(|| {
             tape.reset_to(mark);
             chain_tape(&tape, tape.var(xid), backward)
         });
-        let (check, ok) = chain_check(n, y, grad.as_deref());
         report(
-            Case {
-                bench: "elementwise_chain",
-                imp: "tape",
-                mode,
-                size: ("n", n),
-            },
+            ("elementwise_chain", "tape", mode, ("n", n)),
             threads,
-            (med, min, runs),
-            check,
-            ok,
+            timing,
+            chain_check(n, y, grad.as_deref()),
         );
 
         let mut grad = vec![0f32; n];
-        let (med, min, runs, y) = time(|| chain_fused(&x, backward.then_some(&mut grad[..])));
-        let (check, ok) = chain_check(n, y, backward.then_some(&grad[..]));
+        let (timing, y) = time(|| chain_fused(&x, backward.then_some(&mut grad[..])));
         report(
-            Case {
-                bench: "elementwise_chain",
-                imp: "fused",
-                mode,
-                size: ("n", n),
-            },
+            ("elementwise_chain", "fused", mode, ("n", n)),
             threads,
-            (med, min, runs),
-            check,
-            ok,
+            timing,
+            chain_check(n, y, backward.then_some(&grad[..])),
         );
     }
 }
@@ -343,7 +324,7 @@ fn gather_scatter(m: usize, threads: usize) {
         let texel = tape.constant(&d.texel).id();
         let weight = tape.constant(&d.weight).id();
         let mark = tape.mark();
-        let (med, min, runs, (y, grad)) = time(|| {
+        let (timing, (y, grad)) = time(|| {
             tape.reset_to(mark);
             let (table, texel, weight) = (tape.var(table), tape.var(texel), tape.var(weight));
             let rgb = table.gather_channel(texel, 3, 0)
@@ -355,34 +336,20 @@ fn gather_scatter(m: usize, threads: usize) {
             }
             (tape.value(y)[0] as f64, backward.then(|| tape.grad(table).to_vec()))
         });
-        let (check, ok) = gather_check(y, grad.as_deref());
         report(
-            Case {
-                bench: "gather_scatter",
-                imp: "tape",
-                mode,
-                size: ("m", m),
-            },
+            ("gather_scatter", "tape", mode, ("m", m)),
             threads,
-            (med, min, runs),
-            check,
-            ok,
+            timing,
+            gather_check(y, grad.as_deref()),
         );
 
         let mut grad = vec![0f32; d.table.len()];
-        let (med, min, runs, y) = time(|| gather_fused(&d, backward.then_some(&mut grad[..])));
-        let (check, ok) = gather_check(y, backward.then_some(&grad[..]));
+        let (timing, y) = time(|| gather_fused(&d, backward.then_some(&mut grad[..])));
         report(
-            Case {
-                bench: "gather_scatter",
-                imp: "fused",
-                mode,
-                size: ("m", m),
-            },
+            ("gather_scatter", "fused", mode, ("m", m)),
             threads,
-            (med, min, runs),
-            check,
-            ok,
+            timing,
+            gather_check(y, backward.then_some(&grad[..])),
         );
     }
 }
@@ -391,9 +358,10 @@ fn gather_scatter(m: usize, threads: usize) {
 
 const K: usize = 10_000;
 
-fn small_check(y: f64, sum_grad: Option<f64>) -> (Value, bool) {
+/// Checksums, and the time per op of a run that took `median_s`.
+fn small_check(y: f64, sum_grad: Option<f64>, median_s: f64) -> (Value, bool) {
     let mut ok = close(y, 2.0713811511571367, 1e-5);
-    let mut check = json!({ "y": y });
+    let mut check = json!({ "y": y, "per_op_us": median_s / K as f64 * 1e6 });
     if let Some(s) = sum_grad {
         check["sum_grad"] = json!(s);
         ok &= close(s, 10.78087952077259, 1e-5);
@@ -445,7 +413,7 @@ fn small_ops_overhead(threads: usize) {
         let tape = Tape::<f32>::new();
         let xid = tape.leaf(&x).id();
         let mark = tape.mark();
-        let (med, min, runs, (y, s)) = time(|| {
+        let (timing, (y, s)) = time(|| {
             tape.reset_to(mark);
             let x = tape.var(xid);
             let mut v = x;
@@ -464,36 +432,20 @@ fn small_ops_overhead(threads: usize) {
             let s = backward.then(|| tape.grad(x).iter().map(|&g| g as f64).sum::<f64>());
             (tape.value(y)[0] as f64, s)
         });
-        let (mut check, ok) = small_check(y, s);
-        check["per_op_us"] = json!(med / K as f64 * 1e6);
         report(
-            Case {
-                bench: "small_ops_overhead",
-                imp: "tape",
-                mode,
-                size: ("k", K),
-            },
+            ("small_ops_overhead", "tape", mode, ("k", K)),
             threads,
-            (med, min, runs),
-            check,
-            ok,
+            timing,
+            small_check(y, s, timing.0),
         );
 
         let mut history = Vec::with_capacity(K);
-        let (med, min, runs, (y, s)) = time(|| small_fused(&x, &mut history, backward));
-        let (mut check, ok) = small_check(y, backward.then_some(s));
-        check["per_op_us"] = json!(med / K as f64 * 1e6);
+        let (timing, (y, s)) = time(|| small_fused(&x, &mut history, backward));
         report(
-            Case {
-                bench: "small_ops_overhead",
-                imp: "fused",
-                mode,
-                size: ("k", K),
-            },
+            ("small_ops_overhead", "fused", mode, ("k", K)),
             threads,
-            (med, min, runs),
-            check,
-            ok,
+            timing,
+            small_check(y, backward.then_some(s), timing.0),
         );
     }
 }

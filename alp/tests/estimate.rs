@@ -11,7 +11,9 @@ use render::integrator::{RenderSettings, render_image};
 use render::pose::Pose;
 use render::procedural::SodaCan;
 
-fn scene() -> (render::probe::ProbeAsset, Pose, Camera, EnvMap) {
+/// A small photo of the can (16 spp) with its true pose, and fast settings
+/// with a 64x32 output map.
+fn scene() -> (render::probe::ProbeAsset, Pose, Photo, Settings) {
     let probe = SodaCan::default().build();
     let camera = Camera::new(
         160,
@@ -22,15 +24,9 @@ fn scene() -> (render::probe::ProbeAsset, Pose, Camera, EnvMap) {
         Vec3::Y,
     )
     .expect("camera");
-    let pose = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::new(0.01, 0.0, 0.0));
+    let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::new(0.01, 0.0, 0.0));
     let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
     let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
-    (probe, pose, camera, env)
-}
-
-#[test]
-fn finds_the_probe_and_explains_the_photo() {
-    let (probe, truth, camera, env) = scene();
     let (image, mask) = render_image(
         &probe,
         &truth,
@@ -42,6 +38,12 @@ fn finds_the_probe_and_explains_the_photo() {
     let photo = Photo::new(image, mask, camera).expect("a valid photo");
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
+    (probe, truth, photo, settings)
+}
+
+#[test]
+fn finds_the_probe_and_explains_the_photo() {
+    let (probe, truth, photo, settings) = scene();
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     assert_eq!((result.env.width(), result.env.height()), (64, 32));
     let centre = Vec3::new(0.0, 0.061, 0.0);
@@ -66,15 +68,7 @@ fn finds_the_probe_and_explains_the_photo() {
 
 #[test]
 fn bad_photos_are_clear_errors() {
-    let (probe, truth, camera, env) = scene();
-    let (image, mask) = render_image(
-        &probe,
-        &truth,
-        &camera,
-        &env,
-        &GgxMetal,
-        &RenderSettings { spp: 1, seed: 1 },
-    );
+    let (_, _, Photo { image, mask, camera }, _) = scene();
     let empty = Mask::new(160, 120, vec![false; 160 * 120]);
     let err = Photo::new(image.clone(), empty, camera)
         .err()
@@ -89,23 +83,11 @@ fn bad_photos_are_clear_errors() {
     nan.pixels[5][1] = f32::NAN;
     let err = Photo::new(nan, mask, camera).err().expect("NaN is refused");
     assert!(err.to_string().contains("NaN"), "{err}");
-    let _ = probe;
 }
 
 #[test]
 fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
-    let (probe, truth, camera, env) = scene();
-    let (image, mask) = render_image(
-        &probe,
-        &truth,
-        &camera,
-        &env,
-        &GgxMetal,
-        &RenderSettings { spp: 16, seed: 1 },
-    );
-    let photo = Photo::new(image, mask, camera).expect("a valid photo");
-    let mut settings = Settings::new(Quality::Fast);
-    settings.env_size = (64, 32);
+    let (probe, truth, photo, settings) = scene();
     let (map, psnr) = alp::estimate::estimate_lighting(&photo, &probe, &truth, &settings).expect("a map");
     assert_eq!((map.width(), map.height()), (64, 32));
     assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");

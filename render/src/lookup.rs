@@ -85,18 +85,15 @@ impl<'t, T: Real> ImageVars<'t, T> {
             y0.clamp(T::zero(), h - T::one()),
             (y0 + T::one()).clamp(T::zero(), h - T::one()),
         );
-        let (t00, t01) = (r0.mul_add(self.width_var(), c0), r0.mul_add(self.width_var(), c1));
-        let (t10, t11) = (r1.mul_add(self.width_var(), c0), r1.mul_add(self.width_var(), c1));
+        let width = self.texels.tape().scalar(w);
+        let (t00, t01) = (r0.mul_add(width, c0), r0.mul_add(width, c1));
+        let (t10, t11) = (r1.mul_add(width, c0), r1.mul_add(width, c1));
         let (gx, gy) = (fx.rsub(T::one()), fy.rsub(T::one()));
         let (w00, w01, w10, w11) = (gx * gy, fx * gy, gx * fy, fx * fy);
         std::array::from_fn(|c| {
             let g = |t| self.texels.gather_channel(t, 3, c);
             g(t00) * w00 + g(t01) * w01 + g(t10) * w10 + g(t11) * w11
         })
-    }
-
-    fn width_var(&self) -> Var<'t, T> {
-        self.texels.tape().scalar(T::c(self.width as f64))
     }
 
     /// The environment map's radiance arriving from unit directions `d`

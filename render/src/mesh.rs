@@ -258,31 +258,9 @@ impl EdgeAdjacency {
 mod tests {
     use super::*;
 
-    /// A unit cube with per-face vertices (24), like an OBJ with a UV seam on every edge.
-    pub(crate) fn cube() -> Mesh {
-        let mut positions = Vec::new();
-        let mut triangles = Vec::new();
-        for axis in 0..3 {
-            for sign in [-1.0f32, 1.0] {
-                let n = Vec3::from_array(std::array::from_fn(|i| if i == axis { sign } else { 0.0 }));
-                let u = Vec3::from_array(std::array::from_fn(|i| if i == (axis + 1) % 3 { 1.0 } else { 0.0 }));
-                let v = n.cross(u);
-                let base = positions.len() as u32;
-                for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                    positions.push(0.5 * (n + a * u + b * v));
-                }
-                triangles.push([base, base + 1, base + 2]);
-                triangles.push([base, base + 2, base + 3]);
-            }
-        }
-        let uvs = vec![Vec2::ZERO; positions.len()];
-        let normals = smooth_vertex_normals(&positions, &triangles);
-        Mesh::new(positions, normals, uvs, triangles)
-    }
-
     #[test]
     fn cube_welds_to_8_vertices_and_is_closed() {
-        let mesh = cube();
+        let mesh = crate::procedural::unit_cube();
         let weld = mesh.weld_by_position();
         let mut reps = weld.clone();
         reps.sort();
@@ -299,7 +277,7 @@ mod tests {
 
     #[test]
     fn cube_silhouette_seen_along_an_axis_is_its_outline() {
-        let mesh = cube();
+        let mesh = crate::procedural::unit_cube();
         let adjacency = EdgeAdjacency::new(&mesh);
         // Seen from an eye off every axis, three faces face it: the outline is a hexagon.
         let eye = Vec3::new(3.0, 4.0, 5.0);
@@ -308,7 +286,7 @@ mod tests {
 
     #[test]
     fn interpolation_uses_weights_of_corners_1_and_2() {
-        let mesh = cube();
+        let mesh = crate::procedural::unit_cube();
         let p = mesh.interpolate(&mesh.positions, 0, Vec2::new(1.0, 0.0));
         assert_eq!(p, mesh.corners(0)[1]);
     }

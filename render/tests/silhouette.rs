@@ -6,7 +6,7 @@ use autodiff::gradcheck::{GradcheckReport, Input, gradcheck};
 use glam::{Quat, Vec2, Vec3};
 use render::camera::Camera;
 use render::image_io::Mask;
-use render::mesh::{Mesh, smooth_vertex_normals};
+use render::mesh::Mesh;
 use render::pose::Pose;
 use render::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use render::procedural::{SodaCan, UvSphere};
@@ -211,33 +211,11 @@ fn hard_coverage_of_a_sphere_has_its_area() {
     );
 }
 
-/// A unit cube (per-face vertices) seen face-on: one front face, a square outline.
-fn cube() -> Mesh {
-    let mut positions = Vec::new();
-    let mut triangles = Vec::new();
-    for axis in 0..3 {
-        for sign in [-1.0f32, 1.0] {
-            let n = Vec3::from_array(std::array::from_fn(|i| if i == axis { sign } else { 0.0 }));
-            let u = Vec3::from_array(std::array::from_fn(|i| if i == (axis + 1) % 3 { 1.0 } else { 0.0 }));
-            let v = n.cross(u);
-            let base = positions.len() as u32;
-            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                positions.push(0.5 * (n + a * u + b * v));
-            }
-            triangles.push([base, base + 1, base + 2]);
-            triangles.push([base, base + 2, base + 3]);
-        }
-    }
-    let normals = smooth_vertex_normals(&positions, &triangles);
-    let uvs = vec![Vec2::ZERO; positions.len()];
-    Mesh::new(positions, normals, uvs, triangles)
-}
-
 #[test]
 fn soft_mask_is_hard_away_from_the_silhouette_and_half_on_it() {
     // A 0.03 m cube (rotated in the image plane so that its outline crosses pixel centres at all
     // offsets) 0.3 m in front of the camera: its front face is a square of about 22 px.
-    let mesh = cube();
+    let mesh = render::procedural::unit_cube();
     let camera = camera();
     let pose = Pose::new(Quat::from_rotation_z(0.3), 0.03, Vec3::new(0.0, 0.061, 0.055));
     let plan = SilhouettePlan::new(

@@ -682,28 +682,36 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         // explain away (texture baked into the light).
         let coarse = fit_lighting(&probe, photo, &pose, RANKING_SIZE, &quick, &clipped, 1.0, None)?;
         let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
-        let fit = fit_lighting(
-            &probe,
-            photo,
-            &pose,
-            work,
-            &quick,
-            &clipped,
-            POSE_SEARCH_SMOOTHNESS,
-            None,
-        )?;
-        phases.push(lighting_report("lighting", &fit, t1, score));
+        phases.push(lighting_report("lighting_ranking", &coarse, t1, score));
         starts.push(StartReport {
             yaw_deg: yaw,
             silhouette_loss: sil_loss,
             psnr_db: score,
         });
-        candidates.push((pose, fit, depth));
+        candidates.push((pose, depth));
     }
     let chosen = (0..starts.len())
         .max_by(|&a, &b| starts[a].psnr_db.total_cmp(&starts[b].psnr_db))
         .ok_or_else(|| RenderError::value("starts", "at least one orientation start is needed"))?;
-    let (mut pose, mut fit, depth) = candidates.swap_remove(chosen);
+    let (mut pose, depth) = candidates[chosen];
+    // The working-resolution map only for the start kept.
+    let t1 = Instant::now();
+    let mut fit = fit_lighting(
+        &probe,
+        photo,
+        &pose,
+        work,
+        &quick,
+        &clipped,
+        POSE_SEARCH_SMOOTHNESS,
+        None,
+    )?;
+    phases.push(lighting_report(
+        "lighting",
+        &fit,
+        t1,
+        psnr(&fit.rendered, &fit.target, &fit.weight),
+    ));
     for round in 0..settings.rounds {
         let env = env_from_texels(&fit.env, work.0, work.1)?;
         let (new_pose, report) = fit_pose_to_image(
