@@ -87,8 +87,11 @@ fn bad_photos_are_clear_errors() {
 
 #[test]
 fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
-    let (probe, truth, photo, settings) = scene();
-    let (map, psnr) = alp::estimate::estimate_lighting(&photo, &probe, &truth, &settings).expect("a map");
-    assert_eq!((map.width(), map.height()), (64, 32));
+    let (probe, truth, photo, mut settings) = scene();
+    settings.known_pose = Some(truth);
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    assert_eq!(result.pose, truth, "a known pose is kept");
+    assert_eq!(result.report.chosen_start, None);
+    let psnr = result.report.psnr_db;
     assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use render::camera::Camera;
 use render::image_io::{Mask, RgbImage};
+use render::pose::Pose;
 use render::{RenderError, Result};
 
 use super::{Photo, Quality, Settings, estimate};
@@ -36,6 +37,9 @@ pub struct EstimateArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// The probe's pose.json when it is known: the lighting alone is estimated.
+    #[arg(long)]
+    pub pose: Option<PathBuf>,
     /// Output env map size, WIDTHxHEIGHT (2:1).
     #[arg(long, default_value = "256x128")]
     pub env_size: String,
@@ -77,6 +81,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     if args.threads == Some(0) {
         return Err(RenderError::value("--threads", "needs at least one thread"));
     }
+    settings.known_pose = args.pose.as_ref().map(Pose::read).transpose()?;
     let camera = Camera::read(&args.camera)?;
     let image = RgbImage::read_exr(&args.image)?;
     let mask = Mask::read_png(&args.mask)?;

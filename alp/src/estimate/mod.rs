@@ -88,6 +88,9 @@ pub struct Settings {
     pub working_height: Option<usize>,
     /// Weight of the lighting smoothness (scale-free).
     pub smoothness: f64,
+    /// The probe's pose when it is known (the lighting alone is estimated).
+    #[serde(skip)]
+    pub known_pose: Option<Pose>,
 }
 
 impl Settings {
@@ -110,6 +113,7 @@ impl Settings {
             spp_final,
             working_height: None,
             smoothness: 1e-4,
+            known_pose: None,
         }
     }
 }
@@ -192,8 +196,8 @@ pub struct Report {
     pub settings: Settings,
     /// Every start.
     pub starts: Vec<StartReport>,
-    /// The index of the start kept.
-    pub chosen_start: usize,
+    /// The index of the start kept (none when the pose was given).
+    pub chosen_start: Option<usize>,
     /// Working env map resolution (width, height) and why.
     pub working_resolution: (usize, usize),
     /// The smallest roughness of the probe, which set it.
@@ -636,6 +640,124 @@ fn resample(env: &EnvMap, width: usize, height: usize) -> Result<EnvMap> {
     EnvMap::new(width, height, radiance)
 }
 
+/// What the pose search found: the pose, the lighting fitted there, every
+/// start's account and the index of the start kept.
+struct PoseSearch {
+    pose: Pose,
+    fit: LightingFit,
+    starts: Vec<StartReport>,
+    chosen: usize,
+}
+
+/// The pose search: the silhouette phase from every orientation start, the
+/// ranking by re-rendering PSNR, then alternation of pose and lighting from
+/// the best start (see the module's description).
+fn search_pose(
+    probe: &Probe,
+    photo: &Photo,
+    reference: &ReferenceMask,
+    clipped: &[bool],
+    work: (usize, usize),
+    settings: &Settings,
+    phases: &mut Vec<PhaseReport>,
+) -> Result<PoseSearch> {
+    let q_ref = init::front_facing(&photo.camera);
+    let mut starts = Vec::new();
+    let mut candidates = Vec::new();
+    let quick = RenderSettings {
+        spp: settings.spp_pose,
+        seed: settings.seed,
+    };
+    for &yaw in &settings.starts_deg {
+        let start = init::initial_pose(&probe.asset.mesh, &photo.camera, &photo.mask, yaw)?;
+        let depth = (start.translation - photo.camera.origin).length();
+        let (pose, sil_loss, report) = fit_silhouette(
+            probe,
+            photo,
+            reference,
+            start,
+            q_ref,
+            settings.silhouette_iters,
+            depth,
+        )?;
+        phases.push(report);
+        let t1 = Instant::now();
+        // Ranked under a coarse, smooth map: a wrong orientation puts the
+        // probe's texture in the wrong place, which only a detailed map could
+        // explain away (texture baked into the light).
+        let coarse = fit_lighting(probe, photo, &pose, RANKING_SIZE, &quick, clipped, 1.0, None)?;
+        let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
+        phases.push(lighting_report("lighting_ranking", &coarse, t1, score));
+        starts.push(StartReport {
+            yaw_deg: yaw,
+            silhouette_loss: sil_loss,
+            psnr_db: score,
+        });
+        candidates.push((pose, depth));
+    }
+    let chosen = (0..starts.len())
+        .max_by(|&a, &b| starts[a].psnr_db.total_cmp(&starts[b].psnr_db))
+        .ok_or_else(|| RenderError::value("starts", "at least one orientation start is needed"))?;
+    let (mut pose, depth) = candidates[chosen];
+    // The working-resolution map only for the start kept.
+    let t1 = Instant::now();
+    let mut fit = fit_lighting(
+        probe,
+        photo,
+        &pose,
+        work,
+        &quick,
+        clipped,
+        POSE_SEARCH_SMOOTHNESS,
+        None,
+    )?;
+    phases.push(lighting_report(
+        "lighting",
+        &fit,
+        t1,
+        psnr(&fit.rendered, &fit.target, &fit.weight),
+    ));
+    for round in 0..settings.rounds {
+        let env = env_from_texels(&fit.env, work.0, work.1)?;
+        let (new_pose, report) = fit_pose_to_image(
+            probe,
+            photo,
+            reference,
+            pose,
+            &env,
+            &fit,
+            settings,
+            depth,
+            settings.seed + 1000 * round as u64,
+        )?;
+        phases.push(report);
+        pose = new_pose;
+        let t1 = Instant::now();
+        fit = fit_lighting(
+            probe,
+            photo,
+            &pose,
+            work,
+            &quick,
+            clipped,
+            POSE_SEARCH_SMOOTHNESS,
+            Some(&fit.env),
+        )?;
+        phases.push(lighting_report(
+            "lighting",
+            &fit,
+            t1,
+            psnr(&fit.rendered, &fit.target, &fit.weight),
+        ));
+    }
+    Ok(PoseSearch {
+        pose,
+        fit,
+        starts,
+        chosen,
+    })
+}
+
 /// Estimates the pose and the lighting from `photo` of `probe`.
 pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Result<Estimate> {
     let t0 = Instant::now();
@@ -655,96 +777,14 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
     let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
     let work_h = settings.working_height.unwrap_or_else(|| working_height(min_roughness));
     let work = (2 * work_h, work_h);
-    let q_ref = init::front_facing(&photo.camera);
     let mut phases = Vec::new();
-    let mut starts = Vec::new();
-    let mut candidates = Vec::new();
-    let quick = RenderSettings {
-        spp: settings.spp_pose,
-        seed: settings.seed,
+    let (pose, fit, starts, chosen) = match settings.known_pose {
+        Some(pose) => (pose, None, Vec::new(), None),
+        None => {
+            let search = search_pose(&probe, photo, &reference, &clipped, work, settings, &mut phases)?;
+            (search.pose, Some(search.fit), search.starts, Some(search.chosen))
+        }
     };
-    for &yaw in &settings.starts_deg {
-        let start = init::initial_pose(&asset.mesh, &photo.camera, &photo.mask, yaw)?;
-        let depth = (start.translation - photo.camera.origin).length();
-        let (pose, sil_loss, report) = fit_silhouette(
-            &probe,
-            photo,
-            &reference,
-            start,
-            q_ref,
-            settings.silhouette_iters,
-            depth,
-        )?;
-        phases.push(report);
-        let t1 = Instant::now();
-        // Ranked under a coarse, smooth map: a wrong orientation puts the
-        // probe's texture in the wrong place, which only a detailed map could
-        // explain away (texture baked into the light).
-        let coarse = fit_lighting(&probe, photo, &pose, RANKING_SIZE, &quick, &clipped, 1.0, None)?;
-        let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
-        phases.push(lighting_report("lighting_ranking", &coarse, t1, score));
-        starts.push(StartReport {
-            yaw_deg: yaw,
-            silhouette_loss: sil_loss,
-            psnr_db: score,
-        });
-        candidates.push((pose, depth));
-    }
-    let chosen = (0..starts.len())
-        .max_by(|&a, &b| starts[a].psnr_db.total_cmp(&starts[b].psnr_db))
-        .ok_or_else(|| RenderError::value("starts", "at least one orientation start is needed"))?;
-    let (mut pose, depth) = candidates[chosen];
-    // The working-resolution map only for the start kept.
-    let t1 = Instant::now();
-    let mut fit = fit_lighting(
-        &probe,
-        photo,
-        &pose,
-        work,
-        &quick,
-        &clipped,
-        POSE_SEARCH_SMOOTHNESS,
-        None,
-    )?;
-    phases.push(lighting_report(
-        "lighting",
-        &fit,
-        t1,
-        psnr(&fit.rendered, &fit.target, &fit.weight),
-    ));
-    for round in 0..settings.rounds {
-        let env = env_from_texels(&fit.env, work.0, work.1)?;
-        let (new_pose, report) = fit_pose_to_image(
-            &probe,
-            photo,
-            &reference,
-            pose,
-            &env,
-            &fit,
-            settings,
-            depth,
-            settings.seed + 1000 * round as u64,
-        )?;
-        phases.push(report);
-        pose = new_pose;
-        let t1 = Instant::now();
-        fit = fit_lighting(
-            &probe,
-            photo,
-            &pose,
-            work,
-            &quick,
-            &clipped,
-            POSE_SEARCH_SMOOTHNESS,
-            Some(&fit.env),
-        )?;
-        phases.push(lighting_report(
-            "lighting",
-            &fit,
-            t1,
-            psnr(&fit.rendered, &fit.target, &fit.weight),
-        ));
-    }
     let t1 = Instant::now();
     let final_settings = RenderSettings {
         spp: settings.spp_final,
@@ -758,7 +798,7 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         &final_settings,
         &clipped,
         settings.smoothness,
-        Some(&fit.env),
+        fit.as_ref().map(|f| f.env.as_slice()),
     )?;
     let final_psnr = psnr(&fit.rendered, &fit.target, &fit.weight);
     phases.push(lighting_report("lighting_final", &fit, t1, final_psnr));
@@ -786,37 +826,4 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         rerender,
         report,
     })
-}
-
-/// The lighting alone at a known pose (the lighting phase of [`estimate`]
-/// without the pose search): the map at the output size and the
-/// re-rendering PSNR.
-pub fn estimate_lighting(photo: &Photo, asset: &ProbeAsset, pose: &Pose, settings: &Settings) -> Result<(EnvMap, f64)> {
-    let probe = Probe {
-        asset,
-        edges: EdgeAdjacency::new(&asset.mesh),
-    };
-    let clipped = clipped_pixels(photo);
-    let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
-    let work_h = settings.working_height.unwrap_or_else(|| working_height(min_roughness));
-    let rs = RenderSettings {
-        spp: settings.spp_final,
-        seed: settings.seed,
-    };
-    let fit = fit_lighting(
-        &probe,
-        photo,
-        pose,
-        (2 * work_h, work_h),
-        &rs,
-        &clipped,
-        settings.smoothness,
-        None,
-    )?;
-    let env = resample(
-        &env_from_texels(&fit.env, 2 * work_h, work_h)?,
-        settings.env_size.0,
-        settings.env_size.1,
-    )?;
-    Ok((env, psnr(&fit.rendered, &fit.target, &fit.weight)))
 }
