@@ -17,10 +17,11 @@
 //! p(omega) = p(u, v) / (2 pi^2 sin theta): about proportional to the luminance (exactly so at the
 //! texel centres). Wherever the bilinear radiance is non-zero, so is the density.
 //!
-//! Sampling inverts it exactly: a strip between two rows of knots by its mass, a row position in
-//! it from the linear marginal, one of the two rows' column profiles as a mixture with weights
-//! `(1 - t) m_a` and `t m_b`, a segment of that row by its mass, a position in the segment from
-//! the linear density.
+//! Sampling inverts the CDFs, so that stratified numbers give stratified directions: a strip
+//! between two rows of knots by its mass, a row position in it from the linear marginal, then the
+//! conditional over columns at that row position, `(1 - t)` times the profile of the row above
+//! plus `t` times the one below: a segment from the blend of the two rows' segment CDFs, a
+//! position in it from the linear density.
 
 use std::f64::consts::PI;
 
@@ -56,8 +57,9 @@ pub struct EnvSampler {
     /// Over the `height + 1` strips of rows: half a row above the first knots, one between each
     /// two rows of knots, half a row below the last.
     strips: Distribution1D,
-    /// Per row of knots: over its `width` segments between neighbouring knots (the last wraps).
-    segments: Vec<Distribution1D>,
+    /// Per row of knots: the CDF over its `width` segments between neighbouring knots (the last
+    /// wraps), `width + 1` values from 0 to 1, row after row.
+    segment_cdfs: Vec<f64>,
     /// `p(u, v)` at the texel centres, in a grey map: its bilinear lookup is `p(u, v)` anywhere.
     density: EnvMap,
 }
@@ -92,19 +94,28 @@ impl EnvSampler {
         let mut strip_masses = vec![0.5 * row_means[0]];
         strip_masses.extend(row_means.windows(2).map(|m| 0.5 * (m[0] + m[1])));
         strip_masses.push(0.5 * row_means[height - 1]);
-        let segments = rows()
-            .map(|row| {
-                let masses: Vec<f64> = (0..width).map(|j| row[j] + row[(j + 1) % width]).collect();
-                Distribution1D::new(&masses)
-            })
-            .collect();
+        let mut segment_cdfs = Vec::with_capacity(height * (width + 1));
+        for (row, &mean) in rows().zip(&row_means) {
+            // Segment masses (c_j + c_j+1) / 2, summing to `width` times the row's mean.
+            let mut sum = 0.0;
+            segment_cdfs.push(0.0);
+            for j in 0..width {
+                sum += 0.5 * (row[j] + row[(j + 1) % width]);
+                // A black row is never picked; any CDF will do.
+                segment_cdfs.push(if mean > 0.0 {
+                    sum / (width as f64 * mean)
+                } else {
+                    (j + 1) as f64 / width as f64
+                });
+            }
+        }
         let density = knots.iter().map(|&c| [(c / z) as f32; 3]).collect();
         Self {
             width,
             height,
             row_means,
             strips: Distribution1D::new(&strip_masses),
-            segments,
+            segment_cdfs,
             density: EnvMap::new(width, height, density).expect("a density map of the env map's size"),
             knots,
         }
@@ -129,17 +140,30 @@ impl EnvSampler {
                 ((s - 1) as f64 + t, (s - 1, s), t)
             }
         };
+        // The blend's weights: each row's share of the conditional's mass.
         let (mass_a, mass_b) = ((1.0 - t) * self.row_means[rows.0], t * self.row_means[rows.1]);
-        let share_a = if mass_a > 0.0 { mass_a / (mass_a + mass_b) } else { 0.0 };
-        let ux = u.y as f64;
-        let (row, ux) = if ux < share_a {
-            (rows.0, ux / share_a)
-        } else {
-            (rows.1, (ux - share_a) / (1.0 - share_a))
+        let share_b = if mass_b > 0.0 { mass_b / (mass_a + mass_b) } else { 0.0 };
+        let cdf = |j: usize| {
+            let at = |row: usize| self.segment_cdfs[row * (w + 1) + j];
+            (1.0 - share_b) * at(rows.0) + share_b * at(rows.1)
         };
-        let (segment, fx) = self.segments[row].sample(ux as f32);
-        let knot = |col: usize| self.knots[row * w + col % w];
-        let x = segment as f64 + sample_linear(fx as f64, knot(segment), knot(segment + 1));
+        let ux = u.y as f64;
+        // Bisection for cdf(j) <= ux < cdf(j + 1) (cdf(0) = 0, cdf(w) = 1): segment j has positive mass.
+        let (mut segment, mut above) = (0, w);
+        while above - segment > 1 {
+            let mid = (segment + above) / 2;
+            if cdf(mid) <= ux {
+                segment = mid;
+            } else {
+                above = mid;
+            }
+        }
+        let fx = ((ux - cdf(segment)) / (cdf(segment + 1) - cdf(segment))).clamp(0.0, 1.0);
+        let knot = |col: usize| {
+            let at = |row: usize| self.knots[row * w + col % w];
+            (1.0 - t) * at(rows.0) + t * at(rows.1)
+        };
+        let x = segment as f64 + sample_linear(fx, knot(segment), knot(segment + 1));
         let uv = Vec2::new(
             ((x + 0.5) / w as f64).rem_euclid(1.0) as f32,
             ((y + 0.5) / h as f64) as f32,
