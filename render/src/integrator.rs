@@ -72,12 +72,15 @@ pub struct PrimaryHits {
     pub direction: Vec<Vec3>,
     /// Per hit sample: two uniform random numbers for the BRDF sample.
     pub random: Vec<Vec2>,
-    /// Per hit sample: two uniform random numbers for the env-map sample.
-    pub light_random: Vec<Vec2>,
+    /// The seed of the random numbers (the env-map samples draw theirs when needed).
+    pub seed: u64,
 }
 
-/// A hit sample while tracing: triangle, ray direction, random numbers (BRDF, env map).
-type HitSample = (u32, Vec3, Vec2, Vec2);
+/// Start of the random number streams of the BRDF samples (plus the pixel
+/// index: apart from the sub-pixel offsets', whose stream is the pixel index).
+const BSDF_STREAM: u64 = 1 << 40;
+/// Start of the random number streams of the env-map samples (plus the pixel index).
+const LIGHT_STREAM: u64 = 2 << 40;
 
 impl PrimaryHits {
     /// Traces `spp` stratified rays through every pixel of the probe's
@@ -163,7 +166,7 @@ impl PrimaryHits {
         };
         // Per row, in parallel: the hit pixels (index, samples, hit count),
         // the hit samples in pixel order, and the rays traced.
-        type RowHits = (Vec<(u32, u32, u32)>, Vec<HitSample>, usize);
+        type RowHits = (Vec<(u32, u32, u32)>, Vec<(u32, Vec3, Vec2)>, usize);
         let per_row: Vec<RowHits> = rows
             .clone()
             .into_par_iter()
@@ -175,14 +178,12 @@ impl PrimaryHits {
                     let n = if on_silhouette(row, col) { silhouette_spp } else { spp };
                     let offsets = &mut offsets[..n];
                     stratified_offsets(settings.seed, pixel, offsets);
-                    // Streams apart from the offsets' (which use the pixel index).
-                    let mut rng = Rng::new(settings.seed, (1u64 << 40) + pixel as u64);
-                    let mut light_rng = Rng::new(settings.seed, (2u64 << 40) + pixel as u64);
+                    let mut rng = Rng::new(settings.seed, BSDF_STREAM + pixel as u64);
                     let before = samples.len();
                     for &offset in offsets.iter() {
-                        let (random, light_random) = (rng.next_2d(), light_rng.next_2d());
+                        let random = rng.next_2d();
                         if let Some((triangle, dir)) = hits_probe(row, col, offset) {
-                            samples.push((triangle, dir, random, light_random));
+                            samples.push((triangle, dir, random));
                         }
                     }
                     rays += n;
@@ -198,6 +199,7 @@ impl PrimaryHits {
             height: h,
             spp: spp as u32,
             rays: corners.len() + per_row.iter().map(|r| r.2).sum::<usize>(),
+            seed: settings.seed,
             ..Default::default()
         };
         for (pixels, samples, _) in per_row {
@@ -207,12 +209,11 @@ impl PrimaryHits {
                 hits.pixels.push(pixel);
                 hits.samples.push(n);
                 hits.coverage.push(count as f32 / n as f32);
-                for (triangle, dir, random, light_random) in samples.by_ref().take(count as usize) {
+                for (triangle, dir, random) in samples.by_ref().take(count as usize) {
                     hits.segment.push(segment);
                     hits.triangle.push(triangle);
                     hits.direction.push(dir);
                     hits.random.push(random);
-                    hits.light_random.push(light_random);
                 }
             }
         }
@@ -286,7 +287,12 @@ impl<'t, T: Real> SampleVars<'t, T> {
             ),
             corners: [corner(0), corner(1), corner(2)],
             segment: array(&|i| hits.segment[i] as f64),
-            pixel_share: array(&|i| 1.0 / hits.samples[hits.segment[i] as usize] as f64),
+            // One value, broadcast, when every pixel has `spp` samples.
+            pixel_share: if hits.samples.iter().all(|&n| n == hits.spp) {
+                tape.constant(&[T::c(1.0 / hits.spp as f64)])
+            } else {
+                array(&|i| 1.0 / hits.samples[hits.segment[i] as usize] as f64)
+            },
             random: [array(&|i| hits.random[i].x as f64), array(&|i| hits.random[i].y as f64)],
         }
     }
@@ -470,7 +476,16 @@ pub fn light_samples_with<'t, T: Real>(
     let bsdf_scale = scale * w_bsdf;
     // The env sample: f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q)
     // with q = 1 / p_e, which is 0 on a pole (p_e infinite there).
-    let lights: Vec<_> = hits.light_random.par_iter().map(|&u| sampler.sample(u)).collect();
+    // Each pixel's stream gives its hit samples one pair of numbers each, in order.
+    let pixel_runs: Vec<&[u32]> = hits.segment.chunk_by(|a, b| a == b).collect();
+    let lights: Vec<_> = pixel_runs
+        .par_iter()
+        .flat_map_iter(|run| {
+            let pixel = hits.pixels[run[0] as usize] as u64;
+            let mut rng = Rng::new(hits.seed, LIGHT_STREAM + pixel);
+            run.iter().map(move |_| sampler.sample(rng.next_2d()))
+        })
+        .collect();
     let constant = |f: &dyn Fn(&crate::sampling::EnvSample) -> f32| {
         tape.constant(&lights.iter().map(|l| T::c(f(l) as f64)).collect::<Vec<T>>())
     };
