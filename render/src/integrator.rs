@@ -540,7 +540,7 @@ const SILHOUETTE_SPP_FACTOR: u32 = 4;
 /// map ([`LightSampling::Mis`]); silhouette pixels get
 /// [`SILHOUETTE_SPP_FACTOR`] times the samples ([`PrimaryHits::trace_refined`]).
 /// High sample counts run in passes of at most 16 spp (seeds `seed`,
-/// `seed + 1`, ...), averaged, so memory stays bounded.
+/// `seed + 2^32`, ...), averaged, so memory stays bounded.
 pub fn render_image(
     probe: &ProbeAsset,
     pose: &Pose,
@@ -565,7 +565,9 @@ pub fn render_image(
         let spp = SPP_PER_PASS.min(total - pass * SPP_PER_PASS);
         let pass_settings = RenderSettings {
             spp,
-            seed: settings.seed.wrapping_add(pass as u64),
+            // Apart from the passes of seeds `seed + 1`, ... (a second
+            // render for a noise estimate would otherwise share its passes).
+            seed: settings.seed.wrapping_add((pass as u64) << 32),
         };
         let hits = PrimaryHits::trace_refined(
             &probe.mesh,
