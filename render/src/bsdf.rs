@@ -64,7 +64,9 @@ pub struct Lambertian;
 /// `D(h) = alpha^2 / (pi ((n.h)^2 (alpha^2 - 1) + 1)^2)` for `cos_h = n.h`.
 pub fn ggx_distribution<'t, T: Real>(cos_h: Var<'t, T>, alpha2: Var<'t, T>) -> Var<'t, T> {
     let d = (cos_h * cos_h).mul_add(alpha2 - T::one(), cos_h.tape().scalar(T::one()));
-    alpha2 / (d * d * T::PI())
+    // d vanishes only for alpha = 0 on the normal (0 / 0): a Dirac lobe, whose D is 0 there as a
+    // mirror's eval and pdf are.
+    alpha2 / (d * d * T::PI()).max_scalar(T::c(1e-30))
 }
 
 /// `G1(w) = 2 |n.w| / (|n.w| + sqrt(alpha^2 + (1 - alpha^2) (n.w)^2))`.

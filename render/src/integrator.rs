@@ -3,8 +3,10 @@
 //!   L(wo) = v(x) * integral of L_env(wi) f(wi, wo) cos(theta_i) dwi,
 //!
 //! estimated per sub-pixel sample with one BRDF sample (the BRDF's own
-//! importance sampling: GGX visible normals for the metal), times the soft
-//! visibility texture v, averaged into pixels.
+//! importance sampling: GGX visible normals for the metal), or with one BRDF
+//! and one env-map sample combined by multiple importance sampling
+//! ([`LightSampling`]), times the soft visibility texture v, averaged into
+//! pixels.
 //!
 //! Two steps: [`PrimaryHits::trace`] finds which triangle each sub-pixel
 //! sample sees (a BVH, not differentiated); [`shade`] recomputes the hit
@@ -23,17 +25,17 @@ use crate::bsdf::{Bsdf, Surface};
 use crate::camera::Camera;
 use crate::envmap::EnvMap;
 use crate::image_io::{Mask, RgbImage};
-use crate::lookup::{ImageVars, TextureVars};
+use crate::lookup::{EnvPdfVars, ImageVars, TextureVars};
 use crate::mesh::Mesh;
 use crate::pose::Pose;
 use crate::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use crate::probe::ProbeAsset;
-use crate::sampling::Rng;
+use crate::sampling::{EnvSampler, Rng};
 
 /// Monte Carlo settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
-    /// Samples per pixel (stratified sub-pixel positions, one BRDF sample each).
+    /// Samples per pixel (stratified sub-pixel positions, one light sample per strategy each).
     pub spp: u32,
     /// Seed of every random number: the same seed gives the same image on any thread count.
     pub seed: u64,
@@ -52,12 +54,14 @@ pub struct PrimaryHits {
     pub width: usize,
     /// Image height, pixels.
     pub height: usize,
-    /// Samples per pixel.
+    /// Samples per pixel off the silhouette.
     pub spp: u32,
-    /// Rays traced (the bounding box's pixels times `spp`).
+    /// Rays traced (the bounding box's pixels times their samples, and the silhouette test's).
     pub rays: usize,
     /// Row-major indices of the pixels at least one sample of which sees the probe.
     pub pixels: Vec<u32>,
+    /// Per such pixel: the samples traced through it (`spp`, more on the silhouette).
+    pub samples: Vec<u32>,
     /// Fraction of each such pixel's samples that see the probe.
     pub coverage: Vec<f32>,
     /// Per hit sample: its position in `pixels`.
@@ -68,19 +72,48 @@ pub struct PrimaryHits {
     pub direction: Vec<Vec3>,
     /// Per hit sample: two uniform random numbers for the BRDF sample.
     pub random: Vec<Vec2>,
+    /// The seed of the random numbers (the env-map samples draw theirs when needed).
+    pub seed: u64,
 }
+
+/// Start of the random number streams of the BRDF samples (plus the pixel
+/// index: apart from the sub-pixel offsets', whose stream is the pixel index).
+const BSDF_STREAM: u64 = 1 << 40;
+/// Start of the random number streams of the env-map samples (plus the pixel index).
+const LIGHT_STREAM: u64 = 2 << 40;
 
 impl PrimaryHits {
     /// Traces `spp` stratified rays through every pixel of the probe's
     /// projected bounding box (the whole image if part of the probe is
     /// behind the camera), against the mesh with `posed` vertex positions.
     pub fn trace(mesh: &Mesh, posed: &[Vec3], camera: &Camera, settings: &RenderSettings) -> Self {
+        Self::trace_refined(mesh, posed, camera, settings, settings.spp)
+    }
+
+    /// [`trace`](Self::trace) with `silhouette_spp` rays (when more than
+    /// `spp`) through each pixel on the probe's silhouette: the pixels whose
+    /// four corners disagree about hitting the probe. Each pixel averages its
+    /// own samples, so its coverage and radiance stay unbiased.
+    ///
+    /// The corners decide, not the pixel's own samples: a choice made on the
+    /// samples that are then averaged would bias them (a pixel that a corner
+    /// of the probe covers by 1 % is missed by its few samples most of the
+    /// time, and refined only when one of them hits). A silhouette that
+    /// enters and leaves a pixel between its corners is not refined.
+    pub fn trace_refined(
+        mesh: &Mesh,
+        posed: &[Vec3],
+        camera: &Camera,
+        settings: &RenderSettings,
+        silhouette_spp: u32,
+    ) -> Self {
         assert_eq!(
             posed.len(),
             mesh.positions.len(),
             "PrimaryHits::trace: one posed position per vertex"
         );
         let spp = settings.spp.max(1) as usize;
+        let silhouette_spp = (silhouette_spp as usize).max(spp);
         let world = Mesh {
             positions: posed.to_vec(),
             ..mesh.clone()
@@ -106,48 +139,76 @@ impl PrimaryHits {
         } else {
             (0..w, 0..h)
         };
-        // Per row, in parallel: the hit pixels (index, hit count) and the hit
-        // samples, in pixel order.
-        type RowHits = (Vec<(u32, u32)>, Vec<(u32, Vec3, Vec2)>);
-        let rows_traced = rows.len();
+        let hits_probe = |row: usize, col: usize, offset: Vec2| {
+            let (origin, dir) = camera.primary_ray(row as u32, col as u32, offset);
+            accel
+                .closest_hit(origin, dir, f32::INFINITY)
+                .map(|hit| (hit.triangle, dir))
+        };
+        // Whether each pixel corner of the box sees the probe (corner (r, c) is
+        // pixel (r, c)'s top left), when refining.
+        let corner_cols = cols.start..cols.end + 1;
+        let corners: Vec<bool> = if silhouette_spp > spp {
+            (rows.start..rows.end + 1)
+                .into_par_iter()
+                .flat_map_iter(|row| corner_cols.clone().map(move |col| (row, col)))
+                .map(|(row, col)| hits_probe(row, col, Vec2::ZERO).is_some())
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let on_silhouette = |row: usize, col: usize| {
+            let at = |r: usize, c: usize| corners[(r - rows.start) * corner_cols.len() + c - cols.start];
+            !corners.is_empty() && {
+                let first = at(row, col);
+                [at(row, col + 1), at(row + 1, col), at(row + 1, col + 1)].contains(&!first)
+            }
+        };
+        // Per row, in parallel: the hit pixels (index, samples, hit count),
+        // the hit samples in pixel order, and the rays traced.
+        type RowHits = (Vec<(u32, u32, u32)>, Vec<(u32, Vec3, Vec2)>, usize);
         let per_row: Vec<RowHits> = rows
+            .clone()
             .into_par_iter()
             .map(|row| {
-                let mut offsets = vec![Vec2::ZERO; spp];
-                let (mut pixels, mut samples) = (Vec::new(), Vec::new());
+                let mut offsets = vec![Vec2::ZERO; silhouette_spp];
+                let (mut pixels, mut samples, mut rays) = (Vec::new(), Vec::new(), 0);
                 for col in cols.clone() {
                     let pixel = (row * w + col) as u32;
-                    stratified_offsets(settings.seed, pixel, &mut offsets);
-                    // A stream apart from the offsets' (which use the pixel index).
-                    let mut rng = Rng::new(settings.seed, (1u64 << 40) + pixel as u64);
+                    let n = if on_silhouette(row, col) { silhouette_spp } else { spp };
+                    let offsets = &mut offsets[..n];
+                    stratified_offsets(settings.seed, pixel, offsets);
+                    let mut rng = Rng::new(settings.seed, BSDF_STREAM + pixel as u64);
                     let before = samples.len();
-                    for &offset in &offsets {
-                        let (origin, dir) = camera.primary_ray(row as u32, col as u32, offset);
+                    for &offset in offsets.iter() {
                         let random = rng.next_2d();
-                        if let Some(hit) = accel.closest_hit(origin, dir, f32::INFINITY) {
-                            samples.push((hit.triangle, dir, random));
+                        if let Some((triangle, dir)) = hits_probe(row, col, offset) {
+                            samples.push((triangle, dir, random));
                         }
                     }
+                    rays += n;
                     if samples.len() > before {
-                        pixels.push((pixel, (samples.len() - before) as u32));
+                        pixels.push((pixel, n as u32, (samples.len() - before) as u32));
                     }
                 }
-                (pixels, samples)
+                (pixels, samples, rays)
             })
             .collect();
         let mut hits = PrimaryHits {
             width: w,
             height: h,
             spp: spp as u32,
-            rays: cols.len() * rows_traced * spp,
+            rays: corners.len() + per_row.iter().map(|r| r.2).sum::<usize>(),
+            seed: settings.seed,
             ..Default::default()
         };
-        for (pixels, samples) in per_row {
+        for (pixels, samples, _) in per_row {
             let mut samples = samples.into_iter();
-            for (pixel, count) in pixels {
+            for (pixel, n, count) in pixels {
                 let segment = hits.pixels.len() as u32;
                 hits.pixels.push(pixel);
-                hits.coverage.push(count as f32 / spp as f32);
+                hits.samples.push(n);
+                hits.coverage.push(count as f32 / n as f32);
                 for (triangle, dir, random) in samples.by_ref().take(count as usize) {
                     hits.segment.push(segment);
                     hits.triangle.push(triangle);
@@ -209,6 +270,8 @@ struct SampleVars<'t, T: Real> {
     direction: Vec3Var<'t, T>,
     corners: [Var<'t, T>; 3],
     segment: Var<'t, T>,
+    /// 1 / the sample count of the sample's pixel.
+    pixel_share: Var<'t, T>,
     random: [Var<'t, T>; 2],
 }
 
@@ -224,6 +287,12 @@ impl<'t, T: Real> SampleVars<'t, T> {
             ),
             corners: [corner(0), corner(1), corner(2)],
             segment: array(&|i| hits.segment[i] as f64),
+            // One value, broadcast, when every pixel has `spp` samples.
+            pixel_share: if hits.samples.iter().all(|&n| n == hits.spp) {
+                tape.constant(&[T::c(1.0 / hits.spp as f64)])
+            } else {
+                array(&|i| 1.0 / hits.samples[hits.segment[i] as usize] as f64)
+            },
             random: [array(&|i| hits.random[i].x as f64), array(&|i| hits.random[i].y as f64)],
         }
     }
@@ -276,14 +345,14 @@ impl<'t, T: Real> Recip for Var<'t, T> {
     }
 }
 
-/// Where each hit sample reads the environment, and what it passes on: the
+/// Where each light sample reads the environment, and what it passes on: the
 /// image is `sum over samples of throughput * L_env(wi)` per pixel, linear
 /// in the environment map (the lighting solve uses this form directly).
 #[derive(Clone, Copy, Debug)]
 pub struct LightSamples<'t, T: Real> {
-    /// World direction of the BRDF sample (towards the light).
+    /// World direction of the sample (towards the light).
     pub wi: Vec3Var<'t, T>,
-    /// `visibility * f cos / pdf / spp`, RGB.
+    /// `visibility * f cos / pdf * (MIS weight) / (the pixel's samples)`, RGB.
     pub throughput: [Var<'t, T>; 3],
     /// The sample's position in `hits.pixels`.
     pub segment: Var<'t, T>,
@@ -299,8 +368,22 @@ impl<'t, T: Real> LightSamples<'t, T> {
     }
 }
 
+/// How [`light_samples_with`] picks the directions light arrives from.
+#[derive(Clone, Copy, Debug)]
+pub enum LightSampling<'a> {
+    /// One BRDF sample per hit: the paper's estimator.
+    Bsdf,
+    /// One BRDF sample and one sample of the env map's luminance per hit,
+    /// each weighted by the balance heuristic (Veach 1997, section 9.2.2):
+    /// far less noise under small bright sources, which the BRDF's lobe
+    /// rarely finds. The sampler must stay fixed while gradients are taken
+    /// (it is built from a map, not differentiated).
+    Mis(&'a EnvSampler),
+}
+
 /// The light samples of every hit: the hit point on the (moving) triangle,
-/// its material, one BRDF sample.
+/// its material, one BRDF sample (same as [`light_samples_with`] and
+/// [`LightSampling::Bsdf`]).
 pub fn light_samples<'t, T: Real>(
     tape: &'t Tape<T>,
     hits: &PrimaryHits,
@@ -310,13 +393,39 @@ pub fn light_samples<'t, T: Real>(
     triangles: &[[u32; 3]],
     bsdf: &dyn Bsdf<T>,
 ) -> LightSamples<'t, T> {
+    light_samples_with(tape, hits, camera, probe, posed, triangles, bsdf, &LightSampling::Bsdf)
+}
+
+/// The light samples of every hit, picked by `sampling`: the BRDF sample's
+/// first, then (MIS) the env-map sample's, with the same segments.
+///
+/// With MIS, the BRDF sample at `wi_b` (a smooth function of the pose, the
+/// roughness and its random numbers) carries `f cos / p_b * p_b / (p_b + p_e)`
+/// and the env sample at `wi_e` (fixed in the world) carries
+/// `f cos / p_e * p_e / (p_e + p_b)`; the weights add up to 1 at every
+/// direction, so the image's expectation is the integral. Nothing is
+/// detached: every factor is continuous in the parameters, `p_b` included,
+/// and so is `p_e` at the moving `wi_b` (the sampler's density is
+/// continuous for this reason: see `sampling::env`), so each sample's
+/// derivative is the derivative of its contribution and the gradient of
+/// the expectation is unbiased. The one constant is `p_e` at `wi_e`.
+#[allow(clippy::too_many_arguments)]
+pub fn light_samples_with<'t, T: Real>(
+    tape: &'t Tape<T>,
+    hits: &PrimaryHits,
+    camera: &Camera,
+    probe: &ProbeVars<'t, T>,
+    posed: &PosedMesh<'t, T>,
+    triangles: &[[u32; 3]],
+    bsdf: &dyn Bsdf<T>,
+    sampling: &LightSampling,
+) -> LightSamples<'t, T> {
     assert!(!hits.is_empty(), "light_samples: no sample sees the probe");
     let s = SampleVars::new(tape, hits, triangles);
     let origin = Vec3Var::constant(
         tape,
         [camera.origin.x, camera.origin.y, camera.origin.z].map(|c| T::c(c as f64)),
     );
-    let inv_spp = T::c(1.0 / hits.spp as f64);
     // The hit point on the (moving) triangle along the (fixed) ray: Moller-Trumbore.
     let [p0, p1, p2] = s.corners.map(|c| gather3(posed.positions, c));
     let (e1, e2) = (p1 - p0, p2 - p0);
@@ -338,27 +447,71 @@ pub fn light_samples<'t, T: Real>(
     // Shading in the local frame of the interpolated normal.
     let wo_world = -s.direction;
     let (ts, tt) = frame(n, wo_world);
-    let wo = Vec3Var::new(ts.dot(wo_world), tt.dot(wo_world), n.dot(wo_world));
+    let to_local = |w: Vec3Var<'t, T>| Vec3Var::new(ts.dot(w), tt.dot(w), n.dot(w));
+    let wo = to_local(wo_world);
     let surface = Surface {
         albedo: probe.albedo.lookup(u, v),
         roughness: probe.roughness.lookup(u, v)[0],
     };
     let visibility = probe.visibility.lookup(u, v)[0];
+    let scale = visibility * s.pixel_share;
     let sample = bsdf.sample(&surface, wo, s.random);
     let wi = ts.scale(sample.wi.x) + tt.scale(sample.wi.y) + n.scale(sample.wi.z);
-    let scale = visibility * inv_spp;
+    let LightSampling::Mis(sampler) = sampling else {
+        return LightSamples {
+            wi,
+            throughput: sample.weight.map(|w| w * scale),
+            segment: s.segment,
+            pixels: hits.pixels.len(),
+        };
+    };
+    let (zero, one) = (tape.scalar(T::zero()), tape.scalar(T::one()));
+    // The BRDF sample's weight p_b / (p_b + p_e). A lobe that gives its own
+    // sample pdf 0 is a Dirac one (a mirror, GGX at r = 0), which no other
+    // strategy reaches: weight 1.
+    let p_bsdf = bsdf.pdf(&surface, wo, sample.wi);
+    let lobe = p_bsdf.gt(zero);
+    let p_env = EnvPdfVars::new(tape, sampler).pdf(wi);
+    let w_bsdf = lobe.select(p_bsdf / lobe.select(p_bsdf + p_env, one), one);
+    let bsdf_scale = scale * w_bsdf;
+    // The env sample: f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q)
+    // with q = 1 / p_e, which is 0 on a pole (p_e infinite there).
+    // Each pixel's stream gives its hit samples one pair of numbers each, in order.
+    let pixel_runs: Vec<&[u32]> = hits.segment.chunk_by(|a, b| a == b).collect();
+    let lights: Vec<_> = pixel_runs
+        .par_iter()
+        .flat_map_iter(|run| {
+            let pixel = hits.pixels[run[0] as usize] as u64;
+            let mut rng = Rng::new(hits.seed, LIGHT_STREAM + pixel);
+            run.iter().map(move |_| sampler.sample(rng.next_2d()))
+        })
+        .collect();
+    let constant = |f: &dyn Fn(&crate::sampling::EnvSample) -> f32| {
+        tape.constant(&lights.iter().map(|l| T::c(f(l) as f64)).collect::<Vec<T>>())
+    };
+    let wi_env = Vec3Var::new(
+        constant(&|l| l.direction.x),
+        constant(&|l| l.direction.y),
+        constant(&|l| l.direction.z),
+    );
+    let q = constant(&|l| 1.0 / l.pdf);
+    let wi_env_local = to_local(wi_env);
+    let f_cos = bsdf.eval(&surface, wo, wi_env_local);
+    let p_bsdf_env = bsdf.pdf(&surface, wo, wi_env_local);
+    let env_scale = scale * q / p_bsdf_env.mul_add(q, one);
+    let both = |a: Var<'t, T>, b: Var<'t, T>| tape.concat(&[a, b]);
     LightSamples {
-        wi,
-        throughput: sample.weight.map(|w| w * scale),
-        segment: s.segment,
+        wi: Vec3Var::new(both(wi.x, wi_env.x), both(wi.y, wi_env.y), both(wi.z, wi_env.z)),
+        throughput: std::array::from_fn(|c| both(sample.weight[c] * bsdf_scale, f_cos[c] * env_scale)),
+        segment: both(s.segment, s.segment),
         pixels: hits.pixels.len(),
     }
 }
 
 /// Renders the probe's radiance into the pixels of `hits`: one array per
-/// channel, aligned with `hits.pixels`, averaged over the pixel's `spp`
-/// samples (a partly covered pixel sums only its probe samples: the
-/// background is black).
+/// channel, aligned with `hits.pixels`, by BRDF sampling, averaged over
+/// each pixel's samples (a partly covered pixel sums only its probe
+/// samples: the background is black).
 #[allow(clippy::too_many_arguments)]
 pub fn shade<'t, T: Real>(
     tape: &'t Tape<T>,
@@ -377,10 +530,17 @@ pub fn shade<'t, T: Real>(
 /// (every sample's intermediates live on the tape for a pass).
 const SPP_PER_PASS: u32 = 16;
 
+/// How many times more samples [`render_image`] spends on a silhouette pixel
+/// (about 3 % of a 200-pixel-tall can's pixels: 10 % more samples).
+const SILHOUETTE_SPP_FACTOR: u32 = 4;
+
 /// Renders the probe at `pose` under `env` (f32, no gradients): the image
 /// (black background) and the hard coverage mask (at least half of a pixel's
-/// samples see the probe). High sample counts run in passes of at most
-/// 16 spp (seeds `seed`, `seed + 1`, ...), averaged, so memory stays bounded.
+/// samples see the probe). Light is sampled by MIS of the BRDF and the env
+/// map ([`LightSampling::Mis`]); silhouette pixels get
+/// [`SILHOUETTE_SPP_FACTOR`] times the samples ([`PrimaryHits::trace_refined`]).
+/// High sample counts run in passes of at most 16 spp (seeds `seed`,
+/// `seed + 2^32`, ...), averaged, so memory stays bounded.
 pub fn render_image(
     probe: &ProbeAsset,
     pose: &Pose,
@@ -398,29 +558,39 @@ pub fn render_image(
     let vars = ProbeVars::new(&tape, probe, false);
     let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
     let env_vars = ImageVars::env(&tape, env, false);
+    let sampler = EnvSampler::new(env);
     let positions = posed.position_values();
     let mark = tape.mark();
     for pass in 0..passes {
         let spp = SPP_PER_PASS.min(total - pass * SPP_PER_PASS);
         let pass_settings = RenderSettings {
             spp,
-            seed: settings.seed.wrapping_add(pass as u64),
+            // Apart from the passes of seeds `seed + 1`, ... (a second
+            // render for a noise estimate would otherwise share its passes).
+            seed: settings.seed.wrapping_add((pass as u64) << 32),
         };
-        let hits = PrimaryHits::trace(&probe.mesh, &positions, camera, &pass_settings);
+        let hits = PrimaryHits::trace_refined(
+            &probe.mesh,
+            &positions,
+            camera,
+            &pass_settings,
+            spp * SILHOUETTE_SPP_FACTOR,
+        );
         if hits.is_empty() {
             break;
         }
         tape.reset_to(mark);
-        let rgb = shade(
+        let rgb = light_samples_with(
             &tape,
             &hits,
             camera,
             &vars,
             &posed,
             &probe.mesh.triangles,
-            &env_vars,
             bsdf,
-        );
+            &LightSampling::Mis(&sampler),
+        )
+        .radiance(&env_vars);
         let rgb = rgb.map(|c| tape.to_vec(c));
         let share = spp as f64 / total as f64;
         for (k, &p) in hits.pixels.iter().enumerate() {

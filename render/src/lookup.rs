@@ -9,6 +9,7 @@ use autodiff::{Real, Tape, Var, Vec3 as Vec3Var};
 use crate::envmap::EnvMap;
 use crate::image_io::RgbImage;
 use crate::probe::Texture;
+use crate::sampling::EnvSampler;
 
 /// An RGB image on a tape: texel-major RGB (`(row * width + col) * 3 + channel`).
 #[derive(Clone, Copy, Debug)]
@@ -62,51 +63,110 @@ impl<'t, T: Real> ImageVars<'t, T> {
     /// row, texel centres at integers), wrapping columns when `wrap_columns`
     /// and clamping otherwise; rows always clamp.
     pub fn bilinear(&self, x: Var<'t, T>, y: Var<'t, T>, wrap_columns: bool) -> [Var<'t, T>; 3] {
-        let (w, h) = (T::c(self.width as f64), T::c(self.height as f64));
-        let x = if wrap_columns {
-            x
-        } else {
-            x.clamp(T::zero(), w - T::one())
-        };
-        let x0 = x.floor();
-        let y0 = y.floor();
-        let fx = x - x0;
-        let fy = (y - y0).clamp(T::zero(), T::one());
-        let column = |c: Var<'t, T>| {
-            if wrap_columns {
-                // c mod width, for c >= -width.
-                c - (c * (T::one() / w)).floor() * w
-            } else {
-                c.min_scalar(w - T::one())
-            }
-        };
-        let (c0, c1) = (column(x0), column(x0 + T::one()));
-        let (r0, r1) = (
-            y0.clamp(T::zero(), h - T::one()),
-            (y0 + T::one()).clamp(T::zero(), h - T::one()),
-        );
-        let width = self.texels.tape().scalar(w);
-        let (t00, t01) = (r0.mul_add(width, c0), r0.mul_add(width, c1));
-        let (t10, t11) = (r1.mul_add(width, c0), r1.mul_add(width, c1));
-        let (gx, gy) = (fx.rsub(T::one()), fy.rsub(T::one()));
-        let (w00, w01, w10, w11) = (gx * gy, fx * gy, gx * fy, fx * fy);
+        let taps = bilinear_taps(x, y, self.width, self.height, wrap_columns);
         std::array::from_fn(|c| {
-            let g = |t| self.texels.gather_channel(t, 3, c);
-            g(t00) * w00 + g(t01) * w01 + g(t10) * w10 + g(t11) * w11
+            let g = |(t, w): (Var<'t, T>, Var<'t, T>)| self.texels.gather_channel(t, 3, c) * w;
+            g(taps[0]) + g(taps[1]) + g(taps[2]) + g(taps[3])
         })
     }
 
     /// The environment map's radiance arriving from unit directions `d`
-    /// (pointing from the scene to the light): `u = atan2(x, -z) / 2pi`
-    /// wrapped into [0, 1), `v = acos(y) / pi`, texel centres at +0.5.
+    /// (pointing from the scene to the light).
     pub fn env_radiance(&self, d: Vec3Var<'t, T>) -> [Var<'t, T>; 3] {
-        let u = d.x.atan2(-d.z) * T::c(0.5 / std::f64::consts::PI);
-        let u = u.lt(self.texels.tape().scalar(T::zero())).select(u + T::one(), u);
-        // Clamped off the poles, where acos' derivative is infinite.
-        let v = d.y.clamp(T::c(-1.0 + 1e-7), T::c(1.0 - 1e-7)).acos() * T::c(1.0 / std::f64::consts::PI);
-        let x = u * T::c(self.width as f64) - T::c(0.5);
-        let y = v * T::c(self.height as f64) - T::c(0.5);
+        let (x, y) = env_texel_coordinates(d, self.width, self.height);
         self.bilinear(x, y, true)
+    }
+}
+
+/// The four texels around continuous texel coordinates (`x` = column, `y` =
+/// row, texel centres at integers) of a `width` x `height` image and their
+/// bilinear weights: (texel index, weight), columns wrapping when
+/// `wrap_columns` and clamping otherwise, rows clamping.
+fn bilinear_taps<'t, T: Real>(
+    x: Var<'t, T>,
+    y: Var<'t, T>,
+    width: usize,
+    height: usize,
+    wrap_columns: bool,
+) -> [(Var<'t, T>, Var<'t, T>); 4] {
+    let (w, h) = (T::c(width as f64), T::c(height as f64));
+    let x = if wrap_columns {
+        x
+    } else {
+        x.clamp(T::zero(), w - T::one())
+    };
+    let x0 = x.floor();
+    let y0 = y.floor();
+    let fx = x - x0;
+    let fy = (y - y0).clamp(T::zero(), T::one());
+    let column = |c: Var<'t, T>| {
+        if wrap_columns {
+            // c mod width, for c >= -width.
+            c - (c * (T::one() / w)).floor() * w
+        } else {
+            c.min_scalar(w - T::one())
+        }
+    };
+    let (c0, c1) = (column(x0), column(x0 + T::one()));
+    let (r0, r1) = (
+        y0.clamp(T::zero(), h - T::one()),
+        (y0 + T::one()).clamp(T::zero(), h - T::one()),
+    );
+    let width = x.tape().scalar(w);
+    let (gx, gy) = (fx.rsub(T::one()), fy.rsub(T::one()));
+    [
+        (r0.mul_add(width, c0), gx * gy),
+        (r0.mul_add(width, c1), fx * gy),
+        (r1.mul_add(width, c0), gx * fy),
+        (r1.mul_add(width, c1), fx * fy),
+    ]
+}
+
+/// Continuous texel coordinates (column, row; texel centres at integers) of
+/// unit directions `d` in a `width` x `height` lat-long map:
+/// `u = atan2(x, -z) / 2pi` wrapped into [0, 1), `v = acos(y) / pi`, texel
+/// centres at +0.5 (FORMATS.md).
+fn env_texel_coordinates<'t, T: Real>(d: Vec3Var<'t, T>, width: usize, height: usize) -> (Var<'t, T>, Var<'t, T>) {
+    let u = d.x.atan2(-d.z) * T::c(0.5 / std::f64::consts::PI);
+    let u = u.lt(d.x.tape().scalar(T::zero())).select(u + T::one(), u);
+    // Clamped off the poles, where acos' derivative is infinite.
+    let v = d.y.clamp(T::c(-1.0 + 1e-7), T::c(1.0 - 1e-7)).acos() * T::c(1.0 / std::f64::consts::PI);
+    (u * T::c(width as f64) - T::c(0.5), v * T::c(height as f64) - T::c(0.5))
+}
+
+/// The solid-angle pdf of an [`EnvSampler`] on a tape, at any direction:
+/// the bilinear lookup of its density in (u, v), as the radiance is looked
+/// up, over the lat-long Jacobian `2 pi^2 sin(theta)`. Continuous in the
+/// direction (why that matters: `sampling::env`); a constant of the tape.
+#[derive(Clone, Copy, Debug)]
+pub struct EnvPdfVars<'t, T: Real> {
+    /// `p(u, v)` at the texel centres, row-major.
+    density: Var<'t, T>,
+    width: usize,
+    height: usize,
+}
+
+impl<'t, T: Real> EnvPdfVars<'t, T> {
+    /// Records the density of `sampler`.
+    pub fn new(tape: &'t Tape<T>, sampler: &EnvSampler) -> Self {
+        let map = sampler.density_map();
+        let density: Vec<T> = map.radiance().iter().map(|t| T::c(t[0] as f64)).collect();
+        EnvPdfVars {
+            density: tape.constant(&density),
+            width: map.width(),
+            height: map.height(),
+        }
+    }
+
+    /// The pdf of unit directions `d` (world, towards the light).
+    pub fn pdf(&self, d: Vec3Var<'t, T>) -> Var<'t, T> {
+        let (x, y) = env_texel_coordinates(d, self.width, self.height);
+        let taps = bilinear_taps(x, y, self.width, self.height, true);
+        let g = |(t, w): (Var<'t, T>, Var<'t, T>)| self.density.gather(t) * w;
+        let pdf_uv = g(taps[0]) + g(taps[1]) + g(taps[2]) + g(taps[3]);
+        // sqrt(x^2 + z^2) keeps its precision near the poles; kept off 0 there (pdf_uv is finite).
+        let sin_theta = d.x.mul_add(d.x, d.z * d.z).max_scalar(T::c(1e-14)).sqrt();
+        pdf_uv / (sin_theta * T::c(2.0 * std::f64::consts::PI * std::f64::consts::PI))
     }
 }
 
@@ -231,6 +291,45 @@ mod tests {
             let d = Vec3Var::new(v[1], v[2], v[3]).normalize(1e-9);
             let [r, g, b] = image.env_radiance(d);
             r + g * 2.0 + b * 3.0
+        });
+        assert!(report.worst_rel_error < 1e-6, "{report}");
+    }
+
+    #[test]
+    fn env_pdf_on_a_tape_is_the_samplers_pdf_and_is_differentiable() {
+        let env = small_env();
+        let sampler = EnvSampler::new(&env);
+        let tape = Tape::<f64>::new();
+        let pdf = EnvPdfVars::new(&tape, &sampler);
+        let mut dirs: Vec<glam::Vec3> = (0..400)
+            .map(|k| {
+                uv_to_direction(Vec2::new(
+                    (k % 40) as f32 / 40.0 + 0.011,
+                    (k / 40) as f32 / 10.0 + 0.023,
+                ))
+            })
+            .collect();
+        // The seam, and next to the poles.
+        dirs.extend([
+            glam::Vec3::new(1e-4, 0.0, -1.0).normalize(),
+            glam::Vec3::new(-1e-4, 0.0, -1.0).normalize(),
+            glam::Vec3::new(1e-3, 1.0, 2e-3).normalize(),
+            glam::Vec3::new(-2e-3, -1.0, 1e-3).normalize(),
+        ]);
+        let c = |f: fn(&glam::Vec3) -> f32| tape.constant(&dirs.iter().map(|d| f(d) as f64).collect::<Vec<_>>());
+        let got = tape.to_vec(pdf.pdf(Vec3Var::new(c(|d| d.x), c(|d| d.y), c(|d| d.z))));
+        for (d, got) in dirs.iter().zip(got) {
+            let want = sampler.pdf(*d) as f64;
+            assert!((got - want).abs() < 1e-4 * want, "{d}: {got} vs {want}");
+        }
+        let n = 12;
+        let inputs = [
+            Input::Var(uniform(n, -1.0, 1.0, 1)),
+            Input::Var(uniform(n, -0.9, 0.9, 2)),
+            Input::Var(uniform(n, -1.0, 1.0, 3)),
+        ];
+        let report = gradcheck(&inputs, |t, v| {
+            EnvPdfVars::new(t, &sampler).pdf(Vec3Var::new(v[0], v[1], v[2]).normalize(1e-9))
         });
         assert!(report.worst_rel_error < 1e-6, "{report}");
     }

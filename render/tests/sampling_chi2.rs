@@ -323,24 +323,27 @@ fn env_map_sampling_fits_its_pdf() {
 
 #[test]
 fn env_map_pdf_follows_the_lat_long_jacobian() {
-    // A constant map is sampled by solid angle: the texel probability is its solid angle / 4 pi,
-    // and pdf(omega) x 2 pi^2 sin(theta) / (W H) must give back exactly that probability.
+    // A constant map is sampled by solid angle: pdf = 1 / 4 pi, up to the linear interpolation of
+    // the knots' sin(theta) between row centres (relative error (pi / H)^2 / 8 = 3e-4), except
+    // within half a row of a pole, where the density clamps to the first row's knots.
     let env = EnvMap::constant(64, [2.0; 3]);
     let sampler = EnvSampler::new(&env);
     let mut rng = Rng::new(3, 1);
+    let mut checked = 0;
     for _ in 0..1000 {
         let s = sampler.sample(rng.next_2d());
-        let sin_theta = (1.0 - (s.direction.y as f64).powi(2)).sqrt();
-        let texel_probability = s.pdf as f64 * 2.0 * PI * PI * sin_theta / (env.width() * env.height()) as f64;
-        let row = ((direction_to_uv(s.direction).y as f64 * 64.0) as usize).min(63);
-        let expected = env.texel_solid_angle(row) as f64 / (4.0 * PI);
-        assert!(
-            (texel_probability / expected - 1.0).abs() < 1e-3,
-            "pdf {} at {}",
-            s.pdf,
-            s.direction
-        );
+        let v = direction_to_uv(s.direction).y as f64;
+        if (0.5 / 64.0..1.0 - 0.5 / 64.0).contains(&v) {
+            assert!(
+                (s.pdf as f64 * 4.0 * PI - 1.0).abs() < 1e-3,
+                "pdf {} at {}",
+                s.pdf,
+                s.direction
+            );
+            checked += 1;
+        }
     }
+    assert!(checked > 950, "{checked}");
     // On a real map: sum over texels of pdf x solid angle is 1.
     let env = courtyard().downsample(64);
     let sampler = EnvSampler::new(&env);

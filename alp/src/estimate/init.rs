@@ -87,7 +87,10 @@ mod tests {
         let start = initial_pose(&probe.mesh, &camera, &mask, 0.0).expect("a start");
         let centre = Vec3::new(0.0, 0.061, 0.0);
         let err = (start.transform_point(centre) - truth.transform_point(centre)).length();
-        assert!(err < 0.02, "start is {err} m from the truth");
+        // Measured 0.028 m on the mask of coverage >= 1/2 (render_image samples
+        // silhouette pixels 4x); a 1-sample mask, whose bounding box reaches
+        // further out, gave 0.015 m.
+        assert!(err < 0.035, "start is {err} m from the truth");
         let axis = start.rotation * Vec3::Y;
         assert!(
             axis.dot(truth.rotation * Vec3::Y) > 0.95,

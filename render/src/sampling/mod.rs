@@ -15,5 +15,6 @@ pub use env::{EnvSample, EnvSampler};
 pub use frame::Frame;
 pub use rng::Rng;
 pub use warp::{
-    cosine_hemisphere_pdf, sample_concentric_disk, sample_cosine_hemisphere, sample_uniform_sphere, uniform_sphere_pdf,
+    cosine_hemisphere_pdf, sample_concentric_disk, sample_cosine_hemisphere, sample_linear, sample_uniform_sphere,
+    uniform_sphere_pdf,
 };
