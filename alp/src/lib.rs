@@ -3,11 +3,12 @@
 //! 2023), by inverting the differentiable renderer of the `render` crate.
 //!
 //! This crate holds what the method adds on top of the renderer: output
-//! folders written atomically, the probe catalogue, and (landing next) the
-//! declarative objective, the estimation, evaluation and the `alp` CLI.
+//! folders written atomically, the probe catalogue, the declarative
+//! objective, the estimation, evaluation and the `alp` CLI.
 
 pub mod estimate;
 pub mod eval;
+pub mod objective;
 pub mod output;
 pub mod probes;
 pub mod relight;

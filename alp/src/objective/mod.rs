@@ -1,0 +1,454 @@
+//! The declarative objective of the single-image estimation (PAPER.md,
+//! "Single-image estimation"):
+//!
+//! ```text
+//! Loss = L_rgb + L_mask + lambda1 L_pose_reg + lambda2 L_light_reg
+//! ```
+//!
+//! as a list of weighted [`Term`]s, each recorded on the tape from what the
+//! phase has (the pose always; the soft mask, the rendered image and the env
+//! map when the phase records them), each reporting its own value and
+//! gradient norm.
+//!
+//! ```
+//! use alp::objective::{Barycenter, Chamfer, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, Weight, Weighting};
+//! let objective = Objective::new()
+//!     .term(RgbL1::log())
+//!     .term(MaskL1)
+//!     .term(Chamfer.weight(0.5))
+//!     .term(Barycenter.weight(Weight::decay_to_zero(10.0, 1.0)))
+//!     .term(OrientationPrior::front_facing().weight(Weight::decay_to_zero(0.1, 1.0)))
+//!     .term(LightSmoothness::new(2.0).weight(1e-2));
+//! assert_eq!(objective.smoothness_weight(0.5), Some(1e-2));
+//! ```
+//!
+//! The same objective as a JSON file: see [`Objective::from_json_str`]. A
+//! new term implements [`Term`] over tape ops and checks its gradient with
+//! [`testing::check_term`] (`examples/custom_loss.rs`).
+
+mod file;
+mod light_smoothness;
+mod mask;
+mod pose_prior;
+mod rgb;
+pub mod testing;
+mod weight;
+
+use std::any::Any;
+
+use autodiff::{Tape, Var};
+use glam::Quat;
+use render::camera::Camera;
+use render::lookup::ImageVars;
+use render::posed::PoseVars;
+use render::silhouette::{ReferenceMask, SoftMask};
+use render::{RenderError, Result};
+use serde::Serialize;
+
+pub use light_smoothness::LightSmoothness;
+pub use mask::{Chamfer, MaskL1};
+pub use pose_prior::{Barycenter, OrientationPrior};
+pub use rgb::{RgbL1, RgbVariant, luminance, mask_mean_luminance};
+pub use weight::{DecayShape, Weight};
+
+/// One term of the loss: a scalar recorded on the tape from the context.
+///
+/// Implement it over tape ops (their gradients come from the ops' own
+/// vector-Jacobian products) and check it with [`testing::check_term`].
+pub trait Term: Any + Send + Sync {
+    /// The name reports and objective files use (`snake_case`).
+    fn name(&self) -> &str;
+
+    /// The term's value (a length-1 array) on `ctx.tape`, or `None` when an
+    /// input it needs is absent in this phase (the RGB term while only the
+    /// silhouette is fitted, the smoothness term while the env map is not on
+    /// the tape).
+    fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>>;
+}
+
+/// What the terms may read: the phase's recorded quantities and the photo's.
+pub struct TermContext<'a, 't> {
+    /// The tape everything is recorded on.
+    pub tape: &'t Tape<f64>,
+    /// The probe's pose (the optimised parameters).
+    pub pose: &'a PoseVars<'t, f64>,
+    /// The photo's camera.
+    pub camera: &'a Camera,
+    /// The photo's mask, prepared for the mask losses.
+    pub reference: &'a ReferenceMask,
+    /// The rendered soft mask, when the phase records it.
+    pub soft_mask: Option<&'a SoftMask<'a, 't, f64>>,
+    /// The rendered image and the photo at the probe's pixels, when the phase renders.
+    pub image: Option<ImageTerms<'a, 't>>,
+    /// The env map on the tape, when the phase optimises it.
+    pub env: Option<&'a ImageVars<'t, f64>>,
+    /// The canonical front-facing orientation (`estimate::init::front_facing`).
+    pub front_facing: Quat,
+    /// The fraction of the run done, in [0, 1]: what weight schedules follow.
+    pub progress: f64,
+    /// Seed of the terms' random choices (vary it per iteration).
+    pub seed: u64,
+}
+
+impl TermContext<'_, '_> {
+    /// The image diagonal in pixels: the scale that makes pixel distances
+    /// comparable across resolutions.
+    pub fn diagonal_px(&self) -> f64 {
+        (self.camera.width as f64).hypot(self.camera.height as f64)
+    }
+}
+
+/// The rendered image and the photo at the pixels the probe covers.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageTerms<'a, 't> {
+    pixels: &'a [u32],
+    rendered: [Var<'t, f64>; 3],
+    target: &'a [[f64; 3]],
+    weight: &'a [f64],
+    level: f64,
+}
+
+impl<'a, 't> ImageTerms<'a, 't> {
+    /// The rendered RGB (one array per channel) at row-major `pixels`, the
+    /// photo's RGB there (`target`), each pixel's data `weight` (1 for a
+    /// usable pixel, 0 for one outside the photo's mask, partly covered or
+    /// clipped) and the photo's `level`, its mean luminance inside the mask
+    /// ([`mask_mean_luminance`]), which sets the scale of the relative, log
+    /// and tone-mapped L1: fixed for the run, so that the loss does not move
+    /// with the pixels the pose happens to cover.
+    ///
+    /// Panics when the arrays' lengths differ (a programming error); fails
+    /// on a negative or non-finite weight or target, or a level that is not
+    /// finite and positive.
+    pub fn new(
+        pixels: &'a [u32],
+        rendered: [Var<'t, f64>; 3],
+        target: &'a [[f64; 3]],
+        weight: &'a [f64],
+        level: f64,
+    ) -> Result<Self> {
+        let lens = [
+            rendered[0].len(),
+            rendered[1].len(),
+            rendered[2].len(),
+            target.len(),
+            weight.len(),
+        ];
+        assert!(
+            lens.iter().all(|&l| l == pixels.len()),
+            "ImageTerms::new: {} pixels, but rendered channels [{}, {}, {}], target [{}], weight [{}]",
+            pixels.len(),
+            lens[0],
+            lens[1],
+            lens[2],
+            lens[3],
+            lens[4]
+        );
+        if let Some(w) = weight.iter().find(|w| !(w.is_finite() && **w >= 0.0)) {
+            return Err(RenderError::value(
+                "weight",
+                format!("data weight {w} must be finite and >= 0"),
+            ));
+        }
+        if target.iter().flatten().any(|t| !(t.is_finite() && *t >= 0.0)) {
+            return Err(RenderError::value("target", "holds NaN, infinite or negative radiance"));
+        }
+        if !(level.is_finite() && level > 0.0) {
+            return Err(RenderError::value(
+                "level",
+                format!("the photo's mean luminance {level} must be finite and > 0"),
+            ));
+        }
+        Ok(ImageTerms {
+            pixels,
+            rendered,
+            target,
+            weight,
+            level,
+        })
+    }
+
+    /// Row-major indices of the probe's pixels.
+    pub fn pixels(&self) -> &'a [u32] {
+        self.pixels
+    }
+
+    /// The rendered radiance, one array per channel aligned with [`pixels`](Self::pixels).
+    pub fn rendered(&self) -> [Var<'t, f64>; 3] {
+        self.rendered
+    }
+
+    /// The photo's radiance at the pixels.
+    pub fn target(&self) -> &'a [[f64; 3]] {
+        self.target
+    }
+
+    /// Each pixel's data weight (0: excluded).
+    pub fn weight(&self) -> &'a [f64] {
+        self.weight
+    }
+
+    /// The photo's mean luminance inside its mask.
+    pub fn level(&self) -> f64 {
+        self.level
+    }
+}
+
+/// A term and its weight, as the objective holds it.
+pub struct WeightedTerm {
+    term: Box<dyn Term>,
+    weight: Weight,
+}
+
+impl WeightedTerm {
+    /// The term.
+    pub fn term(&self) -> &dyn Term {
+        self.term.as_ref()
+    }
+
+    /// Its weight.
+    pub fn weight(&self) -> Weight {
+        self.weight
+    }
+}
+
+impl<T: Term> From<T> for WeightedTerm {
+    /// The term at weight 1.
+    fn from(term: T) -> Self {
+        WeightedTerm {
+            term: Box::new(term),
+            weight: Weight::Constant(1.0),
+        }
+    }
+}
+
+/// `.weight(w)` on every term: `Chamfer.weight(0.5)`.
+pub trait Weighting: Term + Sized {
+    /// The term with weight `weight` (a number or a [`Weight`] schedule).
+    fn weight(self, weight: impl Into<Weight>) -> WeightedTerm {
+        WeightedTerm {
+            term: Box::new(self),
+            weight: weight.into(),
+        }
+    }
+}
+
+impl<T: Term> Weighting for T {}
+
+/// A weighted sum of terms.
+#[derive(Default)]
+pub struct Objective {
+    terms: Vec<WeightedTerm>,
+}
+
+impl std::fmt::Debug for Objective {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_map()
+            .entries(self.terms.iter().map(|t| (t.term.name(), t.weight)))
+            .finish()
+    }
+}
+
+/// A term's value in one evaluation.
+#[derive(Clone, Debug)]
+pub struct TermValue<'t> {
+    /// The term's name.
+    pub name: String,
+    /// Its weight at the evaluation's progress.
+    pub weight: f64,
+    /// Its (unweighted) value.
+    pub value: Var<'t, f64>,
+}
+
+/// The objective recorded on a tape: the total and each term that applied.
+#[derive(Clone, Debug)]
+pub struct Evaluation<'t> {
+    /// The weighted sum of the terms: what the optimiser minimises.
+    pub total: Var<'t, f64>,
+    /// Each term that applied in this phase, in the objective's order.
+    pub terms: Vec<TermValue<'t>>,
+}
+
+/// One term's account of an iteration.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TermReport {
+    /// The term's name.
+    pub name: String,
+    /// Its weight at this progress.
+    pub weight: f64,
+    /// Its unweighted value.
+    pub value: f64,
+    /// The norm of its weighted gradient, `weight * |d term / d x|`: what it
+    /// contributes to the step.
+    pub gradient_norm: f64,
+}
+
+impl Objective {
+    /// No terms.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds a term (at weight 1 unless given with `.weight(w)`).
+    pub fn term(mut self, term: impl Into<WeightedTerm>) -> Self {
+        self.terms.push(term.into());
+        self
+    }
+
+    /// The terms and weights of the estimate: relative L1 on RGB (weight 1),
+    /// mask L1 (1) and Chamfer (1, in image diagonals), the barycenter (10)
+    /// and front-facing orientation (0.1) priors decaying linearly to zero
+    /// over the run, and the lighting smoothness (1e-2, sigma 2 degrees) that
+    /// holds while the pose is searched.
+    pub fn paper_default() -> Self {
+        Objective::new()
+            .term(RgbL1::relative())
+            .term(MaskL1)
+            .term(Chamfer)
+            .term(Barycenter.weight(Weight::decay_to_zero(10.0, 1.0)))
+            .term(OrientationPrior::front_facing().weight(Weight::decay_to_zero(0.1, 1.0)))
+            .term(LightSmoothness::new(2.0).weight(1e-2))
+    }
+
+    /// The terms in order.
+    pub fn terms(&self) -> &[WeightedTerm] {
+        &self.terms
+    }
+
+    /// Fails on an objective without terms or with an invalid weight.
+    pub fn validate(&self) -> Result<()> {
+        if self.terms.is_empty() {
+            return Err(RenderError::value("objective", "has no terms"));
+        }
+        for t in &self.terms {
+            t.weight.validate().map_err(|e| {
+                RenderError::value(
+                    format!("{} {}", t.term.name(), e.field_name().unwrap_or("weight")),
+                    e.rule(),
+                )
+            })?;
+        }
+        Ok(())
+    }
+
+    /// The summed weight of the lighting smoothness terms at `progress`, for
+    /// a linear lighting solve (its smoothness is scale-free too); `None`
+    /// when the objective has no such term.
+    pub fn smoothness_weight(&self, progress: f64) -> Option<f64> {
+        self.terms
+            .iter()
+            .filter(|t| (t.term.as_ref() as &dyn Any).is::<LightSmoothness>())
+            .map(|t| t.weight.at(progress))
+            .reduce(|a, b| a + b)
+    }
+
+    /// Records every term that applies in `ctx` and their weighted sum.
+    ///
+    /// Terms at weight 0 are reported but left out of the total (a NaN in
+    /// an unused term cannot poison it). Fails when `ctx.progress` is
+    /// outside [0, 1], a weight is invalid, a term fails or returns more
+    /// than one value, or no term applies.
+    pub fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Evaluation<'t>> {
+        self.validate()?;
+        if !(0.0..=1.0).contains(&ctx.progress) {
+            return Err(RenderError::value(
+                "progress",
+                format!("{} must be in [0, 1] (the fraction of the run done)", ctx.progress),
+            ));
+        }
+        let mut terms = Vec::with_capacity(self.terms.len());
+        let mut total: Option<Var<'t, f64>> = None;
+        for t in &self.terms {
+            let Some(value) = t.term.evaluate(ctx)? else { continue };
+            let name = t.term.name();
+            if value.len() != 1 {
+                return Err(RenderError::value(
+                    format!("term `{name}`"),
+                    format!("returned {} values; a term is a scalar", value.len()),
+                ));
+            }
+            let weight = t.weight.at(ctx.progress);
+            if weight != 0.0 {
+                let weighted = value * weight;
+                total = Some(total.map_or(weighted, |acc| acc + weighted));
+            }
+            terms.push(TermValue {
+                name: name.to_string(),
+                weight,
+                value,
+            });
+        }
+        if terms.is_empty() {
+            let names: Vec<&str> = self.terms.iter().map(|t| t.term.name()).collect();
+            return Err(RenderError::value(
+                "objective",
+                format!(
+                    "none of its terms ({}) applies: the phase records none of their inputs",
+                    names.join(", ")
+                ),
+            ));
+        }
+        Ok(Evaluation {
+            total: total.unwrap_or_else(|| ctx.tape.scalar(0.0)),
+            terms,
+        })
+    }
+}
+
+impl<'t> Evaluation<'t> {
+    /// Each term's unweighted value, by name.
+    pub fn values(&self) -> std::collections::BTreeMap<String, f64> {
+        self.terms
+            .iter()
+            .map(|t| (t.name.clone(), t.value.tape().item(t.value)))
+            .collect()
+    }
+
+    /// Each term's weighted gradient norm `weight * |d term / d wrt|` over
+    /// the leaves `wrt` (e.g. the pose parameters), one backward pass per
+    /// term with a non-zero weight. Afterwards the tape holds the gradient
+    /// of the total, as after `tape.backward(total)`.
+    ///
+    /// Fails when one of `wrt` is not differentiated (a constant).
+    pub fn gradient_norms(&self, wrt: &[Var<'t, f64>]) -> Result<Vec<f64>> {
+        if let Some(k) = wrt.iter().position(|v| !v.requires_grad()) {
+            return Err(RenderError::value(
+                "gradient norms",
+                format!("variable {k} is a constant: gradients are taken with respect to leaves"),
+            ));
+        }
+        let tape = self.total.tape();
+        let norm = |of: Var<'t, f64>| {
+            tape.backward(of);
+            wrt.iter()
+                .map(|&v| tape.grad(v).iter().map(|g| g * g).sum::<f64>())
+                .sum::<f64>()
+                .sqrt()
+        };
+        let norms = self
+            .terms
+            .iter()
+            .map(|t| if t.weight == 0.0 { 0.0 } else { t.weight * norm(t.value) })
+            .collect();
+        tape.backward(self.total);
+        Ok(norms)
+    }
+
+    /// Each term's name, weight, value and weighted gradient norm over
+    /// `wrt` (see [`gradient_norms`](Self::gradient_norms), whose backward
+    /// passes it runs).
+    pub fn report(&self, wrt: &[Var<'t, f64>]) -> Result<Vec<TermReport>> {
+        let norms = self.gradient_norms(wrt)?;
+        Ok(self
+            .terms
+            .iter()
+            .zip(norms)
+            .map(|(t, gradient_norm)| TermReport {
+                name: t.name.clone(),
+                weight: t.weight,
+                value: t.value.tape().item(t.value),
+                gradient_norm,
+            })
+            .collect())
+    }
+}
