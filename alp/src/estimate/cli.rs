@@ -2,13 +2,15 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use render::camera::Camera;
 use render::image_io::{Mask, RgbImage};
 use render::pose::Pose;
 use render::{RenderError, Result};
 
-use super::{Photo, Quality, Settings, estimate};
+use super::{Photo, Quality, Settings, estimate_with_progress};
+use crate::objective::Objective;
 
 /// Flags of `alp estimate`.
 #[derive(clap::Args, Debug)]
@@ -40,6 +42,9 @@ pub struct EstimateArgs {
     /// The probe's pose.json when it is known: the lighting alone is estimated.
     #[arg(long)]
     pub pose: Option<PathBuf>,
+    /// The loss as a JSON objective file (default: assets/objectives/paper_default.json's terms).
+    #[arg(long)]
+    pub objective: Option<PathBuf>,
     /// Output env map size, WIDTHxHEIGHT (2:1).
     #[arg(long, default_value = "256x128")]
     pub env_size: String,
@@ -82,6 +87,9 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         return Err(RenderError::value("--threads", "needs at least one thread"));
     }
     settings.known_pose = args.pose.as_ref().map(Pose::read).transpose()?;
+    if let Some(path) = &args.objective {
+        settings.objective = Arc::new(Objective::from_file(path)?);
+    }
     let camera = Camera::read(&args.camera)?;
     let image = RgbImage::read_exr(&args.image)?;
     let mask = Mask::read_png(&args.mask)?;
@@ -93,14 +101,23 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         .build()
         .map_err(|e| RenderError::value("--threads", e.to_string()))?;
     let verbose = std::io::stderr().is_terminal();
-    if verbose {
-        eprintln!(
-            "alp estimate: {} starts, quality {}",
-            settings.starts_deg.len(),
-            args.quality
-        );
-    }
-    let result = pool.install(|| estimate(&photo, &probe, &settings))?;
+    let bar = if verbose {
+        indicatif::ProgressBar::new(settings.phase_count() as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("alp estimate {bar:30} {pos}/{len} phases, {elapsed} {msg}")
+            .expect("a valid template"),
+    );
+    let result = pool.install(|| {
+        estimate_with_progress(&photo, &probe, &settings, &mut |phase| {
+            bar.set_message(phase.name.clone());
+            bar.inc(1);
+        })
+    });
+    bar.finish_and_clear();
+    let result = result?;
     if verbose {
         for p in &result.report.phases {
             eprintln!("  {:<15} {:>4} evals {:>7.2} s", p.name, p.evaluations, p.wall_s);

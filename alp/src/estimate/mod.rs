@@ -2,16 +2,18 @@
 //! (PAPER.md, "Single-image estimation").
 //!
 //! Per orientation start (yaws about the probe's axis, as the paper's code):
-//! 1. *silhouette*: the pose alone, by Adam on the soft mask's L1 and Chamfer
-//!    losses, the barycenter term and the front-facing orientation prior
-//!    (both decaying to zero), which are defined and informative from any
-//!    start, unlike the image loss;
-//! 2. a quick *lighting* solve at that pose, and the re-rendering PSNR that
-//!    ranks the starts.
+//! 1. *silhouette*: the pose alone, by Adam on the terms of the objective
+//!    ([`crate::objective`]) that need no rendering: the soft mask's L1 and
+//!    Chamfer losses, the barycenter term and the orientation prior (towards
+//!    the start's own orientation; both decaying to zero), which are defined
+//!    and informative from any start, unlike the image loss;
+//! 2. a quick *lighting* solve at that pose under a coarse, smooth map, and
+//!    the mean RGB angle between re-render and photo that ranks the starts
+//!    (the probe's colour pattern in place or not).
 //!
 //! Then, from the best start, *joint* refinement by alternation: the pose by
-//! Adam on the image loss (relative L1 inside the mask) plus the mask terms
-//! with the lighting fixed, and the lighting by the linear solve at the new
+//! Adam on the whole objective (by default relative L1 on RGB inside the
+//! mask plus the mask terms) with the lighting fixed, and the lighting by the linear solve at the new
 //! pose (exact for that pose, which thousands of noisy Adam steps are not).
 //! A final solve at more samples per pixel gives the map.
 //!
@@ -23,6 +25,7 @@ pub mod cli;
 pub mod init;
 pub mod lighting;
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use autodiff::Tape;
@@ -42,6 +45,7 @@ use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 use render::{RenderError, Result};
 use serde::Serialize;
 
+use crate::objective::{Evaluation, ImageTerms, Objective, TermContext, TermReport, mask_mean_luminance};
 use lighting::{LightingSolve, Transport};
 
 /// Speed against accuracy.
@@ -86,14 +90,28 @@ pub struct Settings {
     pub spp_final: u32,
     /// Working env map height (None: from the probe's roughness).
     pub working_height: Option<usize>,
-    /// Weight of the lighting smoothness (scale-free).
+    /// Weight of the final lighting solve's smoothness (scale-free).
     pub smoothness: f64,
+    /// The loss the pose phases minimise; its smoothness weight is the
+    /// lighting solves' while the pose is searched.
+    #[serde(skip)]
+    pub objective: Arc<Objective>,
     /// The probe's pose when it is known (the lighting alone is estimated).
     #[serde(skip)]
     pub known_pose: Option<Pose>,
 }
 
 impl Settings {
+    /// How many phases a run has: per start a silhouette fit and a ranking
+    /// solve, a lighting solve, two per joint round, and the final solve
+    /// (only the final solve when the pose is known).
+    pub fn phase_count(&self) -> usize {
+        match self.known_pose {
+            Some(_) => 1,
+            None => 2 * self.starts_deg.len() + 2 * self.rounds + 2,
+        }
+    }
+
     /// The preset for `quality`.
     pub fn new(quality: Quality) -> Self {
         let (starts_deg, silhouette_iters, rounds, pose_iters, spp_pose, spp_final) = match quality {
@@ -113,6 +131,7 @@ impl Settings {
             spp_final,
             working_height: None,
             smoothness: 1e-4,
+            objective: Arc::new(Objective::paper_default()),
             known_pose: None,
         }
     }
@@ -172,8 +191,11 @@ pub struct PhaseReport {
     pub evaluations: usize,
     /// Wall time, seconds.
     pub wall_s: f64,
-    /// The loss terms at the end.
+    /// The objective's terms at the end (unweighted).
     pub loss: std::collections::BTreeMap<String, f64>,
+    /// Per iteration of a pose phase: every term's weight, value and
+    /// weighted gradient norm (empty for lighting solves).
+    pub per_iteration: Vec<Vec<TermReport>>,
     /// Re-rendering PSNR inside the mask, dB (when the phase renders).
     pub psnr_db: Option<f64>,
 }
@@ -187,6 +209,9 @@ pub struct StartReport {
     pub silhouette_loss: f64,
     /// Re-rendering PSNR after its quick lighting solve, dB.
     pub psnr_db: f64,
+    /// Mean RGB angle between re-render and photo after that solve,
+    /// degrees: what ranks the starts.
+    pub rgb_angle_deg: f64,
 }
 
 /// What `report.json` holds.
@@ -226,12 +251,6 @@ pub struct Estimate {
     pub report: Report,
 }
 
-/// Smoothness of the lighting while the pose is still searched: a detailed
-/// map would explain a misplaced texture away (texture baked into the light)
-/// and hide the pose error from the image loss. The final solve uses the
-/// settings' (weaker) smoothness.
-const POSE_SEARCH_SMOOTHNESS: f64 = 1e-2;
-
 /// The env map size the orientation starts are ranked under.
 const RANKING_SIZE: (usize, usize) = (16, 8);
 
@@ -263,11 +282,21 @@ fn pixel_targets(photo: &Photo, hits: &PrimaryHits, clipped: &[bool]) -> (Vec<[f
         .zip(&hits.coverage)
         .map(|(&p, &c)| {
             let px = photo.image.pixels[p as usize];
-            let usable = photo.mask.inside[p as usize] && c >= 1.0 && !clipped[p as usize];
-            let w = if usable { 1.0 / (lum(px) + eps).powi(2) } else { 0.0 };
+            let w = if usable_pixel(photo, clipped, p, c) {
+                1.0 / (lum(px) + eps).powi(2)
+            } else {
+                0.0
+            };
             (px.map(|v| v as f64), w)
         })
         .unzip()
+}
+
+/// Whether pixel `p` (covered by the probe to `coverage`) is data: inside
+/// the photo's mask, wholly on the probe (a partly covered pixel mixes in
+/// the background) and not clipped.
+fn usable_pixel(photo: &Photo, clipped: &[bool], p: u32, coverage: f32) -> bool {
+    photo.mask.inside[p as usize] && coverage >= 1.0 && !clipped[p as usize]
 }
 
 /// Pixels at the photo's clipping level: when many mask pixels share the
@@ -291,6 +320,22 @@ fn clipped_pixels(photo: &Photo) -> Vec<bool> {
         }
     }
     clipped
+}
+
+/// The mean angle (degrees) between rendered and photographed RGB over the
+/// data pixels: the probe's colour pattern (a label) in the right place or
+/// not, whatever detail of the lighting a coarse map leaves unexplained
+/// (which moves intensity far more than hue).
+fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[f64]) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((r, t), &w) in rendered.iter().zip(target).zip(weight) {
+        if w > 0.0 {
+            let f = |v: &[f64; 3]| v.map(|x| x as f32);
+            sum += crate::eval::rgb_angle_deg(f(r), f(t));
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f64
 }
 
 /// PSNR (dB) of `rendered` against `target` over weighted pixels, with the
@@ -422,76 +467,86 @@ fn pose_adam(iters: usize, depth: f32) -> Result<Adam> {
         .map_err(|e| RenderError::value("pose optimiser", e.to_string()))
 }
 
-/// The silhouette terms of the loss at a pose (recorded on `tape`), with
-/// the decaying barycenter and orientation weights `prior`.
-#[allow(clippy::too_many_arguments)]
-fn silhouette_loss<'t>(
-    tape: &'t Tape<f64>,
-    probe: &Probe,
-    photo: &Photo,
-    reference: &ReferenceMask,
-    pose_vars: &PoseVars<'t, f64>,
-    q_ref: Quat,
-    prior: f64,
-    terms: &mut Terms,
-) -> Result<autodiff::Var<'t, f64>> {
-    let mesh = render::posed::MeshVars::new(tape, &probe.asset.mesh);
-    let posed = PosedMesh::new(&mesh, pose_vars);
-    let plan = SilhouettePlan::with_edges(
-        &probe.asset.mesh,
-        &probe.edges,
-        &posed.position_values(),
-        &photo.camera,
-        SilhouetteSettings::default(),
-    )?;
-    let soft = plan.soft_mask(&posed);
-    let diag = ((photo.camera.width.pow(2) + photo.camera.height.pow(2)) as f64).sqrt();
-    let l1 = soft.mask_l1(reference)?;
-    let chamfer = soft.chamfer(reference)? * (1.0 / diag);
-    let (bx, by) = soft.barycenter();
-    let b = reference.barycenter();
-    let dx = (bx - b.x) * (1.0 / diag);
-    let dy = (by - b.y) * (1.0 / diag);
-    let barycenter = dx * dx + dy * dy;
-    // 1 - (q . q_ref)^2: zero for both signs of the same rotation.
-    let q = pose_vars.rotation;
-    let dot = q.w * q_ref.w as f64 + q.v.x * q_ref.x as f64 + q.v.y * q_ref.y as f64 + q.v.z * q_ref.z as f64;
-    let orientation = (dot * dot).rsub(1.0);
-    let loss = l1 + chamfer + (barycenter * 10.0 + orientation * 0.1) * prior;
-    for (name, v) in [
-        ("mask_l1", l1),
-        ("chamfer", chamfer),
-        ("barycenter", barycenter),
-        ("orientation", orientation),
-    ] {
-        terms.insert(name.into(), tape.item(v));
-    }
-    Ok(loss)
+/// The fraction of the pose search's progress (what the objective's
+/// weight schedules follow) that the silhouette phase spans; the joint
+/// rounds share the rest.
+const SILHOUETTE_PROGRESS: f64 = 0.5;
+
+/// What one evaluation of the objective during a pose phase sees besides
+/// the pose: the photo, its prepared mask and the phase's progress.
+#[derive(Clone, Copy)]
+struct PoseContext<'a> {
+    probe: &'a Probe<'a>,
+    photo: &'a Photo,
+    reference: &'a ReferenceMask,
+    objective: &'a Objective,
+    front_facing: Quat,
+    /// Pixels excluded as clipped.
+    clipped: &'a [bool],
+    /// The photo's mean luminance in the mask (the image terms' scale).
+    level: f64,
 }
 
-/// The loss terms a phase reports, by name.
-type Terms = std::collections::BTreeMap<String, f64>;
+impl PoseContext<'_> {
+    /// Records the objective at `pose_vars` with the soft mask and, when
+    /// given, the rendered image.
+    fn evaluate<'t>(
+        &self,
+        tape: &'t Tape<f64>,
+        pose_vars: &PoseVars<'t, f64>,
+        image: Option<ImageTerms<'_, 't>>,
+        progress: f64,
+        seed: u64,
+    ) -> Result<Evaluation<'t>> {
+        let mesh = render::posed::MeshVars::new(tape, &self.probe.asset.mesh);
+        let posed = PosedMesh::new(&mesh, pose_vars);
+        let plan = SilhouettePlan::with_edges(
+            &self.probe.asset.mesh,
+            &self.probe.edges,
+            &posed.position_values(),
+            &self.photo.camera,
+            SilhouetteSettings::default(),
+        )?;
+        let soft = plan.soft_mask(&posed);
+        self.objective.evaluate(&TermContext {
+            tape,
+            pose: pose_vars,
+            camera: &self.photo.camera,
+            reference: self.reference,
+            soft_mask: Some(&soft),
+            image,
+            env: None,
+            front_facing: self.front_facing,
+            progress,
+            seed,
+        })
+    }
+}
 
 /// Adam over the pose parameters from `start`: each evaluation records the
-/// loss with `loss(tape, pose, evaluation, terms)` on a fresh f64 tape. A
-/// failed evaluation (the probe left the view) ends the phase with its error.
-fn fit_pose<L>(name: &str, start: Pose, iters: usize, depth: f32, mut loss: L) -> Result<(Pose, f64, PhaseReport)>
+/// objective with `record(tape, pose, evaluation)` on a fresh f64 tape and
+/// reports every term's value and gradient norm. A failed evaluation (the
+/// probe left the view) ends the phase with its error.
+fn fit_pose<R>(name: &str, start: Pose, iters: usize, depth: f32, mut record: R) -> Result<(Pose, f64, PhaseReport)>
 where
-    L: for<'t> FnMut(&'t Tape<f64>, &PoseVars<'t, f64>, usize, &mut Terms) -> Result<autodiff::Var<'t, f64>>,
+    R: for<'t> FnMut(&'t Tape<f64>, &PoseVars<'t, f64>, usize) -> Result<Evaluation<'t>>,
 {
     let t0 = Instant::now();
     let mut adam = pose_adam(iters, depth)?;
-    let (mut evals, mut failure, mut terms) = (0usize, None, Terms::new());
+    let (mut evals, mut failure, mut per_iteration) = (0usize, None, Vec::with_capacity(iters + 1));
     let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
         let tape = Tape::<f64>::new();
         let pose_vars = PoseVars::new(&tape, x, true);
-        let result = loss(&tape, &pose_vars, evals, &mut terms);
+        let result = record(&tape, &pose_vars, evals).and_then(|evaluation| {
+            // The report's backward passes leave the total's gradient on the tape.
+            per_iteration.push(evaluation.report(&[pose_vars.params])?);
+            Ok(evaluation.total)
+        });
         evals += 1;
         match result {
-            Ok(l) => {
-                tape.backward(l);
+            Ok(total) => {
                 g.copy_from_slice(&tape.grad(pose_vars.params));
-                tape.item(l)
+                tape.item(total)
             }
             Err(e) => {
                 failure = Some(e);
@@ -506,105 +561,84 @@ where
     if state.best_value.is_nan() {
         return Err(failure.unwrap_or_else(|| RenderError::value(format!("{name} phase"), "no finite loss")));
     }
+    let loss = per_iteration
+        .last()
+        .map(|terms: &Vec<TermReport>| terms.iter().map(|t| (t.name.clone(), t.value)).collect())
+        .unwrap_or_default();
     let report = PhaseReport {
         name: name.into(),
         iterations: state.iter,
         evaluations: state.evals,
         wall_s: t0.elapsed().as_secs_f64(),
-        loss: terms,
+        loss,
+        per_iteration,
         psnr_db: None,
     };
     Ok((unpack_pose(&state.best_x), state.best_value, report))
 }
 
-/// The silhouette phase from one start: returns the pose, the final loss and the report.
-fn fit_silhouette(
-    probe: &Probe,
-    photo: &Photo,
-    reference: &ReferenceMask,
-    start: Pose,
-    q_ref: Quat,
-    iters: usize,
-    depth: f32,
-) -> Result<(Pose, f64, PhaseReport)> {
-    fit_pose("silhouette", start, iters, depth, |tape, pose_vars, eval, terms| {
-        let prior = (1.0 - eval as f64 / iters.max(1) as f64).max(0.0);
-        silhouette_loss(tape, probe, photo, reference, pose_vars, q_ref, prior, terms)
+/// The silhouette phase from one start (progress 0 to
+/// [`SILHOUETTE_PROGRESS`]): returns the pose, the final loss and the report.
+fn fit_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings, depth: f32) -> Result<(Pose, f64, PhaseReport)> {
+    let iters = settings.silhouette_iters.max(1);
+    fit_pose("silhouette", start, iters, depth, |tape, pose_vars, eval| {
+        let progress = SILHOUETTE_PROGRESS * (eval as f64 / iters as f64).min(1.0);
+        ctx.evaluate(tape, pose_vars, None, progress, settings.seed.wrapping_add(eval as u64))
     })
 }
 
-/// The pose by the image loss (relative L1 in the mask) plus the mask
-/// terms, with the lighting fixed.
-#[allow(clippy::too_many_arguments)]
+/// The pose by the whole objective (image and mask terms) under the fixed
+/// lighting `env`, in joint round `round`.
 fn fit_pose_to_image(
-    probe: &Probe,
-    photo: &Photo,
-    reference: &ReferenceMask,
+    ctx: &PoseContext,
     start: Pose,
     env: &EnvMap,
-    fit: &LightingFit,
     settings: &Settings,
     depth: f32,
-    seed: u64,
+    round: usize,
 ) -> Result<(Pose, PhaseReport)> {
-    // Relative L1 weights: square roots of the least-squares weights.
-    let target_weight: std::collections::HashMap<u32, f64> = fit
-        .hits
-        .pixels
-        .iter()
-        .zip(&fit.weight)
-        .map(|(&p, &w)| (p, w.sqrt()))
-        .collect();
-    let (pose, _, report) = fit_pose(
-        "pose",
-        start,
-        settings.pose_iters,
-        depth,
-        |tape, pose_vars, eval, terms| {
-            let vars = ProbeVars::new(tape, probe.asset, false);
-            let posed = PosedMesh::new(&vars.mesh, pose_vars);
-            let rs = RenderSettings {
-                spp: settings.spp_pose,
-                seed: seed.wrapping_add(eval as u64),
-            };
-            let hits = PrimaryHits::trace(&probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
-            if hits.is_empty() {
-                return Err(RenderError::value("pose", "the probe left the camera's view"));
-            }
-            let env_vars = ImageVars::env(tape, env, false);
-            let rgb = light_samples(
-                tape,
-                &hits,
-                &photo.camera,
-                &vars,
-                &posed,
-                &probe.asset.mesh.triangles,
-                &GgxMetal,
-            )
-            .radiance(&env_vars);
-            let weights: Vec<f64> = hits
-                .pixels
-                .iter()
-                .map(|p| target_weight.get(p).copied().unwrap_or(0.0))
-                .collect();
-            let wsum: f64 = weights.iter().sum::<f64>().max(1e-30);
-            let w = tape.constant(&weights);
-            let mut image = None;
-            for (c, channel) in rgb.iter().enumerate() {
-                let target: Vec<f64> = hits
-                    .pixels
-                    .iter()
-                    .map(|&p| photo.image.pixels[p as usize][c] as f64)
-                    .collect();
-                let term = ((*channel - tape.constant(&target)).abs() * w).sum();
-                image = Some(image.map_or(term, |acc| acc + term));
-            }
-            let image = image.expect("three channels") * (1.0 / (3.0 * wsum));
-            let mask = silhouette_loss(tape, probe, photo, reference, pose_vars, Quat::IDENTITY, 0.0, terms)?;
-            terms.insert("image_rel_l1".into(), tape.item(image));
-            Ok(image + mask)
-        },
-    )?;
+    let photo = ctx.photo;
+    let seed = settings.seed.wrapping_add(1000 * (round as u64 + 1));
+    let iters = settings.pose_iters.max(1);
+    let (pose, _, report) = fit_pose("pose", start, iters, depth, |tape, pose_vars, eval| {
+        let vars = ProbeVars::new(tape, ctx.probe.asset, false);
+        let posed = PosedMesh::new(&vars.mesh, pose_vars);
+        let rs = RenderSettings {
+            spp: settings.spp_pose,
+            seed: seed.wrapping_add(eval as u64),
+        };
+        let hits = PrimaryHits::trace(&ctx.probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
+        if hits.is_empty() {
+            return Err(RenderError::value("pose", "the probe left the camera's view"));
+        }
+        let env_vars = ImageVars::env(tape, env, false);
+        let rendered = light_samples(
+            tape,
+            &hits,
+            &photo.camera,
+            &vars,
+            &posed,
+            &ctx.probe.asset.mesh.triangles,
+            &GgxMetal,
+        )
+        .radiance(&env_vars);
+        let target: Vec<[f64; 3]> = hits
+            .pixels
+            .iter()
+            .map(|&p| photo.image.pixels[p as usize].map(|v| v as f64))
+            .collect();
+        let usable: Vec<f64> = hits
+            .pixels
+            .iter()
+            .zip(&hits.coverage)
+            .map(|(&p, &c)| f64::from(u8::from(usable_pixel(photo, ctx.clipped, p, c))))
+            .collect();
+        let image = ImageTerms::new(&hits.pixels, rendered, &target, &usable, ctx.level)?;
+        let span = 1.0 - SILHOUETTE_PROGRESS;
+        let within = (round as f64 + eval as f64 / iters as f64) / settings.rounds.max(1) as f64;
+        let progress = (SILHOUETTE_PROGRESS + span * within).min(1.0);
+        ctx.evaluate(tape, pose_vars, Some(image), progress, seed.wrapping_add(eval as u64))
+    })?;
     Ok((pose, report))
 }
 
@@ -616,6 +650,7 @@ fn lighting_report(name: &str, fit: &LightingFit, started: Instant, psnr_db: f64
         evaluations: fit.evaluations,
         wall_s: started.elapsed().as_secs_f64(),
         loss: Default::default(),
+        per_iteration: Vec::new(),
         psnr_db: Some(psnr_db),
     }
 }
@@ -650,7 +685,7 @@ struct PoseSearch {
 }
 
 /// The pose search: the silhouette phase from every orientation start, the
-/// ranking by re-rendering PSNR, then alternation of pose and lighting from
+/// ranking by re-rendering colour error, then alternation of pose and lighting from
 /// the best start (see the module's description).
 fn search_pose(
     probe: &Probe,
@@ -659,9 +694,22 @@ fn search_pose(
     clipped: &[bool],
     work: (usize, usize),
     settings: &Settings,
-    phases: &mut Vec<PhaseReport>,
+    phases: &mut PhaseLog,
 ) -> Result<PoseSearch> {
-    let q_ref = init::front_facing(&photo.camera);
+    let ctx = PoseContext {
+        probe,
+        photo,
+        reference,
+        objective: &settings.objective,
+        front_facing: init::front_facing(&photo.camera),
+        clipped,
+        level: mask_mean_luminance(&photo.image, &photo.mask)?,
+    };
+    // The objective's smoothness weight (applied by the linear solve) while
+    // the pose is searched: a detailed map would explain a misplaced texture
+    // away (texture baked into the light) and hide the pose error from the
+    // image loss. The final solve uses the settings' (weaker) smoothness.
+    let search_smoothness = settings.objective.smoothness_weight(1.0).unwrap_or(0.0);
     let mut starts = Vec::new();
     let mut candidates = Vec::new();
     let quick = RenderSettings {
@@ -671,15 +719,14 @@ fn search_pose(
     for &yaw in &settings.starts_deg {
         let start = init::initial_pose(&probe.asset.mesh, &photo.camera, &photo.mask, yaw)?;
         let depth = (start.translation - photo.camera.origin).length();
-        let (pose, sil_loss, report) = fit_silhouette(
-            probe,
-            photo,
-            reference,
-            start,
-            q_ref,
-            settings.silhouette_iters,
-            depth,
-        )?;
+        // The orientation prior holds each start near its own yaw: the
+        // silhouette of a probe symmetric about its axis says nothing about
+        // the yaw, and a prior towards one yaw would pull every start there.
+        let start_ctx = PoseContext {
+            front_facing: start.rotation,
+            ..ctx
+        };
+        let (pose, sil_loss, report) = fit_silhouette(&start_ctx, start, settings, depth)?;
         phases.push(report);
         let t1 = Instant::now();
         // Ranked under a coarse, smooth map: a wrong orientation puts the
@@ -692,25 +739,17 @@ fn search_pose(
             yaw_deg: yaw,
             silhouette_loss: sil_loss,
             psnr_db: score,
+            rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
         });
         candidates.push((pose, depth));
     }
     let chosen = (0..starts.len())
-        .max_by(|&a, &b| starts[a].psnr_db.total_cmp(&starts[b].psnr_db))
+        .min_by(|&a, &b| starts[a].rgb_angle_deg.total_cmp(&starts[b].rgb_angle_deg))
         .ok_or_else(|| RenderError::value("starts", "at least one orientation start is needed"))?;
     let (mut pose, depth) = candidates[chosen];
     // The working-resolution map only for the start kept.
     let t1 = Instant::now();
-    let mut fit = fit_lighting(
-        probe,
-        photo,
-        &pose,
-        work,
-        &quick,
-        clipped,
-        POSE_SEARCH_SMOOTHNESS,
-        None,
-    )?;
+    let mut fit = fit_lighting(probe, photo, &pose, work, &quick, clipped, search_smoothness, None)?;
     phases.push(lighting_report(
         "lighting",
         &fit,
@@ -719,17 +758,7 @@ fn search_pose(
     ));
     for round in 0..settings.rounds {
         let env = env_from_texels(&fit.env, work.0, work.1)?;
-        let (new_pose, report) = fit_pose_to_image(
-            probe,
-            photo,
-            reference,
-            pose,
-            &env,
-            &fit,
-            settings,
-            depth,
-            settings.seed + 1000 * round as u64,
-        )?;
+        let (new_pose, report) = fit_pose_to_image(&ctx, pose, &env, settings, depth, round)?;
         phases.push(report);
         pose = new_pose;
         let t1 = Instant::now();
@@ -740,7 +769,7 @@ fn search_pose(
             work,
             &quick,
             clipped,
-            POSE_SEARCH_SMOOTHNESS,
+            search_smoothness,
             Some(&fit.env),
         )?;
         phases.push(lighting_report(
@@ -758,8 +787,32 @@ fn search_pose(
     })
 }
 
+/// The phases done so far, each announced as it ends.
+struct PhaseLog<'a> {
+    phases: Vec<PhaseReport>,
+    on_phase: &'a mut dyn FnMut(&PhaseReport),
+}
+
+impl PhaseLog<'_> {
+    fn push(&mut self, phase: PhaseReport) {
+        (self.on_phase)(&phase);
+        self.phases.push(phase);
+    }
+}
+
 /// Estimates the pose and the lighting from `photo` of `probe`.
 pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Result<Estimate> {
+    estimate_with_progress(photo, asset, settings, &mut |_| {})
+}
+
+/// [`estimate`], calling `on_phase` as each phase ends (of
+/// [`Settings::phase_count`] in all): what a progress bar follows.
+pub fn estimate_with_progress(
+    photo: &Photo,
+    asset: &ProbeAsset,
+    settings: &Settings,
+    on_phase: &mut dyn FnMut(&PhaseReport),
+) -> Result<Estimate> {
     let t0 = Instant::now();
     let (out_w, out_h) = settings.env_size;
     if out_w != 2 * out_h || out_h < 2 {
@@ -777,7 +830,10 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
     let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
     let work_h = settings.working_height.unwrap_or_else(|| working_height(min_roughness));
     let work = (2 * work_h, work_h);
-    let mut phases = Vec::new();
+    let mut phases = PhaseLog {
+        phases: Vec::new(),
+        on_phase,
+    };
     let (pose, fit, starts, chosen) = match settings.known_pose {
         Some(pose) => (pose, None, Vec::new(), None),
         None => {
@@ -815,7 +871,7 @@ pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Resul
         working_resolution: work,
         min_roughness,
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
-        phases,
+        phases: phases.phases,
         psnr_db: final_psnr,
         wall_s: t0.elapsed().as_secs_f64(),
     };

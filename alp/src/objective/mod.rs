@@ -298,15 +298,17 @@ impl Objective {
     /// The terms and weights of the estimate: relative L1 on RGB (weight 1),
     /// mask L1 (1) and Chamfer (1, in image diagonals), the barycenter (10)
     /// and front-facing orientation (0.1) priors decaying linearly to zero
-    /// over the run, and the lighting smoothness (1e-2, sigma 2 degrees) that
+    /// by progress 0.5 (the end of the estimate's silhouette phase: they
+    /// guide the silhouette fit from a rough start and must not bias the
+    /// final pose), and the lighting smoothness (1e-2, sigma 2 degrees) that
     /// holds while the pose is searched.
     pub fn paper_default() -> Self {
         Objective::new()
             .term(RgbL1::relative())
             .term(MaskL1)
             .term(Chamfer)
-            .term(Barycenter.weight(Weight::decay_to_zero(10.0, 1.0)))
-            .term(OrientationPrior::front_facing().weight(Weight::decay_to_zero(0.1, 1.0)))
+            .term(Barycenter.weight(Weight::decay_to_zero(10.0, 0.5)))
+            .term(OrientationPrior::front_facing().weight(Weight::decay_to_zero(0.1, 0.5)))
             .term(LightSmoothness::new(2.0).weight(1e-2))
     }
 
