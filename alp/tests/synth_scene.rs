@@ -185,3 +185,69 @@ fn synth_rejects_an_unknown_probe_and_writes_nothing() {
     assert!(stderr(&out).contains("missing.exr"), "{}", stderr(&out));
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
+    let (dir, env) = workspace("estimate-objective");
+    let scene = dir.join("scene");
+    assert!(synth(&env, &scene, &["--seed", "5"]).status.success());
+    let estimate = |objective: &Path, out: &Path| {
+        let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
+        let args = [
+            "estimate".into(),
+            "--image".into(),
+            s(&scene.join("image.exr")),
+            "--mask".into(),
+            s(&scene.join("mask.png")),
+            "--camera".into(),
+            s(&scene.join("camera.json")),
+            "--probe".into(),
+            "can".into(),
+            "--quality".into(),
+            "fast".into(),
+            "--env-size".into(),
+            "32x16".into(),
+            "--objective".into(),
+            s(objective),
+            "--out".into(),
+            s(out),
+        ];
+        alp(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    // Mask terms only: the pose phases then never render.
+    let good = dir.join("masks_only.json");
+    std::fs::write(
+        &good,
+        "{\"terms\": [\n  {\"term\": \"mask_l1\"},\n  {\"term\": \"chamfer\", \"weight\": 0.5}\n]}\n",
+    )
+    .expect("write objective");
+    let out = estimate(&good, &dir.join("good"));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("good/report.json")).expect("report")).expect("json");
+    let pose_phase = report["phases"]
+        .as_array()
+        .expect("phases")
+        .iter()
+        .find(|p| p["name"] == "pose")
+        .expect("a pose phase");
+    let names: Vec<&str> = pose_phase["per_iteration"][0]
+        .as_array()
+        .expect("terms")
+        .iter()
+        .map(|t| t["name"].as_str().expect("name"))
+        .collect();
+    assert_eq!(names, ["mask_l1", "chamfer"]);
+
+    let bad = dir.join("bad.json");
+    std::fs::write(
+        &bad,
+        "{\"terms\": [\n  {\"term\": \"mask_l1\"},\n  {\"term\": \"sharpness\"}\n]}\n",
+    )
+    .expect("write objective");
+    let out = estimate(&bad, &dir.join("bad"));
+    assert!(!out.status.success());
+    let message = stderr(&out);
+    assert!(message.contains("line 3") && message.contains("sharpness"), "{message}");
+    assert!(!dir.join("bad").exists(), "nothing is written on a bad objective");
+}
