@@ -31,6 +31,7 @@ use std::time::Instant;
 use autodiff::Tape;
 use glam::{Quat, Vec3};
 use optim::{Adam, ParamGroup, Solver};
+use rayon::prelude::*;
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
 use render::envmap::EnvMap;
@@ -710,38 +711,52 @@ fn search_pose(
     // away (texture baked into the light) and hide the pose error from the
     // image loss. The final solve uses the settings' (weaker) smoothness.
     let search_smoothness = settings.objective.smoothness_weight(1.0).unwrap_or(0.0);
-    let mut starts = Vec::new();
-    let mut candidates = Vec::new();
     let quick = RenderSettings {
         spp: settings.spp_pose,
         seed: settings.seed,
     };
-    for &yaw in &settings.starts_deg {
-        let start = init::initial_pose(&probe.asset.mesh, &photo.camera, &photo.mask, yaw)?;
-        let depth = (start.translation - photo.camera.origin).length();
-        // The orientation prior holds each start near its own yaw: the
-        // silhouette of a probe symmetric about its axis says nothing about
-        // the yaw, and a prior towards one yaw would pull every start there.
-        let start_ctx = PoseContext {
-            front_facing: start.rotation,
-            ..ctx
-        };
-        let (pose, sil_loss, report) = fit_silhouette(&start_ctx, start, settings, depth)?;
-        phases.push(report);
-        let t1 = Instant::now();
-        // Ranked under a coarse, smooth map: a wrong orientation puts the
-        // probe's texture in the wrong place, which only a detailed map could
-        // explain away (texture baked into the light).
-        let coarse = fit_lighting(probe, photo, &pose, RANKING_SIZE, &quick, clipped, 1.0, None)?;
-        let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
-        phases.push(lighting_report("lighting_ranking", &coarse, t1, score));
-        starts.push(StartReport {
-            yaw_deg: yaw,
-            silhouette_loss: sil_loss,
-            psnr_db: score,
-            rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
-        });
-        candidates.push((pose, depth));
+    // The starts are independent and each one's small pose tapes keep about
+    // one core busy: they run side by side (results do not depend on the
+    // thread count; reports keep the starts' order).
+    let fitted: Vec<Result<_>> = settings
+        .starts_deg
+        .par_iter()
+        .map(|&yaw| {
+            let start = init::initial_pose(&probe.asset.mesh, &photo.camera, &photo.mask, yaw)?;
+            let depth = (start.translation - photo.camera.origin).length();
+            // The orientation prior holds each start near its own yaw: the
+            // silhouette of a probe symmetric about its axis says nothing
+            // about the yaw, and a prior towards one yaw would pull every
+            // start there.
+            let start_ctx = PoseContext {
+                front_facing: start.rotation,
+                ..ctx
+            };
+            let (pose, sil_loss, silhouette) = fit_silhouette(&start_ctx, start, settings, depth)?;
+            let t1 = Instant::now();
+            // Ranked under a coarse, smooth map: a wrong orientation puts the
+            // probe's texture in the wrong place, which only a detailed map
+            // could explain away (texture baked into the light).
+            let coarse = fit_lighting(probe, photo, &pose, RANKING_SIZE, &quick, clipped, 1.0, None)?;
+            let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
+            let ranking = lighting_report("lighting_ranking", &coarse, t1, score);
+            let account = StartReport {
+                yaw_deg: yaw,
+                silhouette_loss: sil_loss,
+                psnr_db: score,
+                rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
+            };
+            Ok((silhouette, ranking, account, (pose, depth)))
+        })
+        .collect();
+    let mut starts = Vec::new();
+    let mut candidates = Vec::new();
+    for result in fitted {
+        let (silhouette, ranking, account, candidate) = result?;
+        phases.push(silhouette);
+        phases.push(ranking);
+        starts.push(account);
+        candidates.push(candidate);
     }
     let chosen = (0..starts.len())
         .min_by(|&a, &b| starts[a].rgb_angle_deg.total_cmp(&starts[b].rgb_angle_deg))
