@@ -5,7 +5,8 @@ Python 3 standard library only. Usage (from anywhere):
 
     python3 tools/eval_suite.py --alp PATH_TO_ALP --work DIR \\
         [--qualities fast,default] [--threads 2] [--scenes N] [--out DIR/results.jsonl] \\
-        [--extra-runs default:1:6] [--eval-spp 256] [--sphere] [--envmaps assets/envmaps]
+        [--extra-runs default:1:6] [--eval-spp 256] [--sphere] [--only SUBSTR,...] \\
+        [--envmaps assets/envmaps] [--rss auto|time|wait4]
 
 e.g. the full suite (18 scenes, fast + default with 2 threads, default with 1 thread on the
 first 6 scenes; ~30 min on 2 cores):
@@ -39,9 +40,12 @@ What it does:
 3. `alp eval --scene S --env env.exr --pose pose.json --spp EVAL_SPP`. Evaluation is cached by
    the SHA-256 of (env.exr, pose.json, scene, spp) in DIR/eval_cache.json, so a byte-identical
    estimate (e.g. the same run with another thread count) is not relit again.
-   --eval-spp (default 256, a square): eval's own default of 1024 costs ~4x the time; on the
-   trial scenes the metrics at 256 spp differ from 1024 spp by < 0.02 degrees of angular error
-   and < 0.001 si-RMSE, two orders of magnitude below the errors measured.
+   The cache key includes the SHA-256 of the alp binary (a rebuilt alp is evaluated afresh).
+   --eval-spp (default 256, a square): eval's own default of 1024 takes ~3.5x the time (33 s vs
+   9 s per eval on 2 idle cores). Noise floor measured on 3 estimates (studio cap, sunset can
+   noisy, courtyard can): 256 vs 1024 spp differ by <= 0.02 degrees of angular error and
+   <= 0.007 si-RMSE (the largest: the shiny sphere under sunset, 0.391 vs 0.384; seed 0 vs 1 at
+   256 spp: 0.391 vs 0.383), far below the differences between estimates.
 4. One JSON line per (scene, quality, threads) in --out (default DIR/results.jsonl): scene
    parameters, every field of `alp eval` (mirror/shiny/diffuse angular_deg and si_rmse,
    rotation_deg, axis_deg, translation_mm, scale_ratio), success, wall_s, cpu_s (user + system
@@ -313,9 +317,9 @@ def sha256_files(paths, extra):
     return h.hexdigest()
 
 
-def evaluate(alp, work, scene_dir, est_dir, spp, cache):
+def evaluate(alp, work, scene_dir, est_dir, spp, cache, alp_sha):
     env, pose = os.path.join(est_dir, "env.exr"), os.path.join(est_dir, "pose.json")
-    key = sha256_files([env, pose], "%s|%d" % (os.path.abspath(scene_dir), spp))
+    key = sha256_files([env, pose], "%s|%d|%s" % (os.path.abspath(scene_dir), spp, alp_sha))
     if key in cache:
         return dict(cache[key], eval_cached=True)
     out, wall, _, _ = run([alp, "eval", "--scene", scene_dir, "--env", env, "--pose", pose, "--spp", str(spp)],
@@ -347,7 +351,8 @@ def run_one(args, sc, meta, quality, threads, cache):
     rec = {"scene": sc["name"], "env": sc["env"], "probe": sc["probe"], "variant": sc["variant"],
            "seed": sc["seed"], "tilted": sc["tilted"], "axis_tilt_deg": round(meta["axis_tilt_deg"], 2),
            "noise": sc["noise"], "exposure_clip": meta.get("exposure_clip"),
-           "quality": quality, "threads": threads, "load_1m": round(os.getloadavg()[0], 2)}
+           "quality": quality, "threads": threads, "load_1m": round(os.getloadavg()[0], 2),
+           "alp_sha256": args.alp_sha[:12]}
     with open(os.path.join(scene_dir, "probe.txt")) as f:
         probe = f.read().strip()
     cmd = [args.alp, "estimate", "--image", os.path.join(scene_dir, "image.exr"),
@@ -364,7 +369,7 @@ def run_one(args, sc, meta, quality, threads, cache):
         for k in ("wall_s", "psnr_db", "clipped_pixels", "chosen_start"):
             if k in report:
                 rec["report_" + k if k == "wall_s" else k] = report[k]
-        ev = evaluate(args.alp, args.work, scene_dir, est_dir, args.eval_spp, cache)
+        ev = evaluate(args.alp, args.work, scene_dir, est_dir, args.eval_spp, cache, args.alp_sha)
         for k, v in ev.items():
             if k != "scene":
                 rec[k] = v
@@ -418,11 +423,13 @@ def summary(records, args, cmdline):
                   key=lambda k: (["fast", "default", "best"].index(k[0]) if k[0] in ("fast", "default", "best") else 9, -k[1]))
     L = ["# alp evaluation suite", "",
          "`%s`" % cmdline, "",
-         "alp: `%s`; eval spp %d; success: rotation < %g deg (can), axis < %g deg (cap, symmetric about "
+         "alp: `%s` (sha256 %s); eval spp %d; success: rotation < %g deg (can), axis < %g deg (cap, symmetric about "
          "its axis), translation < %g mm (sphere). Angular error in degrees, translation in mm, wall "
          "time in seconds per image (the whole `alp estimate` process), RSS = max resident set of "
-         "`alp estimate`. Rotation columns: the can only (observable turn); axis: can + cap."
-         % (args.alp, args.eval_spp, SUCCESS_DEG, SUCCESS_DEG, args.sphere_success_mm), "",
+         "`alp estimate`, CPU = its user + system time, max load = the highest 1-minute load average "
+         "seen just before a run (the preceding `alp eval`, on 2 threads, adds ~1.5 by itself). "
+         "Rotation columns: the can only (observable turn); axis: can + cap."
+         % (args.alp, args.alp_sha[:12], args.eval_spp, SUCCESS_DEG, SUCCESS_DEG, args.sphere_success_mm), "",
          "## Per quality and thread count", "",
          "| quality | threads | scenes | failed | ang. mirror | ang. shiny | ang. diffuse | si-RMSE mirror | "
          "si-RMSE shiny | si-RMSE diffuse | rot. median | rot. mean | axis median | axis mean | "
@@ -510,6 +517,8 @@ def main():
     ap.add_argument("--extra-runs", default="", help="Q:T:N[,...]: quality Q, T threads, first N scenes only")
     ap.add_argument("--eval-spp", type=int, default=256, help="alp eval --spp (a square)")
     ap.add_argument("--sphere", action="store_true", help="append 3 sphere scenes")
+    ap.add_argument("--only", default="", help="keep only scenes whose name contains one of these "
+                    "comma-separated strings (after --scenes), e.g. sphere or studio_can")
     ap.add_argument("--sphere-success-mm", type=float, default=3.0)
     ap.add_argument("--envmaps", default=DEFAULT_ENVMAPS)
     ap.add_argument("--rss", choices=["auto", "time", "wait4"], default="auto",
@@ -520,6 +529,7 @@ def main():
     args.alp = os.path.abspath(args.alp)
     args.work = os.path.abspath(args.work)
     args.envmaps = os.path.abspath(args.envmaps)
+    args.alp_sha = sha256_files([args.alp], "")
     os.makedirs(args.work, exist_ok=True)
     out_path = os.path.abspath(args.out or os.path.join(args.work, "results.jsonl"))
     cmdline = " ".join(["python3", os.path.relpath(__file__)] + sys.argv[1:])
@@ -527,6 +537,8 @@ def main():
     scenes = scene_table(args.sphere)
     if args.scenes is not None:
         scenes = scenes[:args.scenes]
+    if args.only:
+        scenes = [sc for sc in scenes if any(w in sc["name"] for w in args.only.split(",") if w)]
     plan = [(i, q, int(t)) for i in range(len(scenes))
             for q in args.qualities.split(",") if q for t in args.threads.split(",") if t]
     for spec in filter(None, args.extra_runs.split(",")):
