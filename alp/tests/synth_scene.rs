@@ -250,4 +250,5 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
     let message = stderr(&out);
     assert!(message.contains("line 3") && message.contains("sharpness"), "{message}");
     assert!(!dir.join("bad").exists(), "nothing is written on a bad objective");
+    std::fs::remove_dir_all(&dir).expect("clean up");
 }
