@@ -46,7 +46,9 @@ use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 use render::{RenderError, Result};
 use serde::Serialize;
 
-use crate::objective::{Evaluation, ImageTerms, Objective, TermContext, TermReport, mask_mean_luminance};
+use crate::objective::{
+    DARK_FRACTION, Evaluation, ImageTerms, Objective, TermContext, TermReport, luminance, mask_mean_luminance,
+};
 use lighting::{LightingSolve, Transport};
 
 /// Speed against accuracy.
@@ -266,31 +268,23 @@ pub fn working_height(min_roughness: f32) -> usize {
 /// Per-pixel data term weights: relative errors (HDR: a highlight must not
 /// outweigh the rest), zero outside the mask, on partly covered pixels and
 /// on clipped ones. Returns the weights and targets aligned with `hits.pixels`.
-fn pixel_targets(photo: &Photo, hits: &PrimaryHits, clipped: &[bool]) -> (Vec<[f64; 3]>, Vec<f64>) {
-    let lum = |p: [f32; 3]| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]) as f64;
-    let mean = photo
-        .image
+fn pixel_targets(photo: &Photo, hits: &PrimaryHits, clipped: &[bool]) -> Result<(Vec<[f64; 3]>, Vec<f64>)> {
+    // The relative L1 term's scale (objective::RgbL1), squared for least squares.
+    let eps = DARK_FRACTION * mask_mean_luminance(&photo.image, &photo.mask)?;
+    Ok(hits
         .pixels
-        .iter()
-        .zip(&photo.mask.inside)
-        .filter(|(_, m)| **m)
-        .map(|(p, _)| lum(*p))
-        .sum::<f64>()
-        / photo.mask.count().max(1) as f64;
-    let eps = 0.05 * mean.max(1e-12);
-    hits.pixels
         .iter()
         .zip(&hits.coverage)
         .map(|(&p, &c)| {
-            let px = photo.image.pixels[p as usize];
+            let px = photo.image.pixels[p as usize].map(|v| v as f64);
             let w = if usable_pixel(photo, clipped, p, c) {
-                1.0 / (lum(px) + eps).powi(2)
+                1.0 / (luminance(px) + eps).powi(2)
             } else {
                 0.0
             };
-            (px.map(|v| v as f64), w)
+            (px, w)
         })
-        .unzip()
+        .unzip())
 }
 
 /// Whether pixel `p` (covered by the probe to `coverage`) is data: inside
@@ -418,7 +412,7 @@ fn fit_lighting(
     let tp = samples.throughput.map(|t| tape.to_vec(t));
     let throughput: Vec<[f32; 3]> = (0..wi.len()).map(|i| [tp[0][i], tp[1][i], tp[2][i]]).collect();
     let transport = Transport::new(&hits.segment, &wi, &throughput, hits.pixels.len(), size.0, size.1);
-    let (target, weight) = pixel_targets(photo, &hits, clipped);
+    let (target, weight) = pixel_targets(photo, &hits, clipped)?;
     // A constant map at the photo's mean level is a neutral start.
     let x0 = match start {
         Some(x) => x.to_vec(),

@@ -43,7 +43,7 @@ pub fn mask_mean_luminance(image: &RgbImage, mask: &Mask) -> Result<f64> {
 /// The HDR regularisation constant of the relative and log variants, as a
 /// fraction of the photo's level: errors of pixels darker than this are
 /// not amplified further (noise).
-const DARK_FRACTION: f64 = 0.05;
+pub const DARK_FRACTION: f64 = 0.05;
 
 /// How the rendered and photographed radiance are compared.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
