@@ -111,9 +111,10 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
             .expect("a valid template"),
     );
     let result = pool.install(|| {
-        estimate_with_progress(&photo, &probe, &settings, &mut |phase| {
+        estimate_with_progress(&photo, &probe, &settings, &mut |phase, done, expected| {
+            bar.set_length(expected as u64);
+            bar.set_position(done as u64);
             bar.set_message(phase.name.clone());
-            bar.inc(1);
         })
     });
     bar.finish_and_clear();

@@ -1,8 +1,8 @@
-//! The starting pose, from the mask and the camera: the probe's known size
+//! Starting poses, from the mask and the camera: the probe's known size
 //! against the mask's extent gives the depth, the mask's barycenter the
-//! direction, and the canonical front-facing orientation (the probe's +Y
-//! along the image's up, its +Z towards the camera) turned by a yaw about
-//! the probe's axis gives one of the orientation starts.
+//! direction, and the mask's shape the hypotheses of where the probe's axis
+//! points (upright, along the mask's principal direction, end-on); turns
+//! about the axis (yaws) make the orientation starts.
 
 use glam::{Mat3, Quat, Vec2, Vec3};
 use render::camera::Camera;
@@ -11,47 +11,169 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 use render::{RenderError, Result};
 
-/// The canonical front-facing orientation for `camera`: mesh +Y along the
-/// image's up, mesh +Z towards the camera.
+/// The canonical front-facing orientation for `camera`: the probe standing
+/// upright in the world (mesh +Y along the camera's `up`, which FORMATS.md
+/// gives in world coordinates) and turned to face the camera.
 pub fn front_facing(camera: &Camera) -> Quat {
-    let up = camera.image_up.normalize();
-    let toward = (-camera.forward - up * up.dot(-camera.forward)).normalize();
-    let x = up.cross(toward);
-    Quat::from_mat3(&Mat3::from_cols(x, up, toward)).normalize()
+    facing(camera, camera.up)
 }
 
-/// The mask's barycenter and the diagonal of its bounding box, pixels.
-pub fn mask_extent(mask: &Mask) -> Result<(Vec2, f32)> {
-    let (mut sum, mut count) = (Vec2::ZERO, 0usize);
-    let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
-    for (i, _) in mask.inside.iter().enumerate().filter(|(_, inside)| **inside) {
-        let p = Vec2::new((i % mask.width) as f32 + 0.5, (i / mask.width) as f32 + 0.5);
-        sum += p;
-        count += 1;
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    if count == 0 {
-        return Err(RenderError::value("mask", "is empty: no pixel marks the probe"));
-    }
-    Ok((sum / count as f32, (hi - lo + Vec2::ONE).length()))
+/// The orientation with mesh +Y along `axis` and mesh +Z turned towards the
+/// camera as far as the axis allows (towards the image's up when the axis
+/// points along the view).
+pub fn facing(camera: &Camera, axis: Vec3) -> Quat {
+    let up = axis.normalize();
+    let toward = -camera.forward - up * up.dot(-camera.forward);
+    let toward = if toward.length() > 0.1 {
+        toward.normalize()
+    } else {
+        (camera.image_up - up * up.dot(camera.image_up)).normalize()
+    };
+    Quat::from_mat3(&Mat3::from_cols(up.cross(toward), up, toward)).normalize()
 }
 
-/// The starting pose for orientation start `yaw_deg` (about the probe's axis).
-pub fn initial_pose(mesh: &Mesh, camera: &Camera, mask: &Mask, yaw_deg: f32) -> Result<Pose> {
-    let (barycenter, diagonal_px) = mask_extent(mask)?;
+/// The mask's barycenter, the diagonal of its bounding box (pixels), its
+/// principal direction (unit, image x right and y down) and elongation (the
+/// ratio of the standard deviations along and across that direction).
+pub struct MaskShape {
+    /// Barycenter, pixels.
+    pub barycenter: Vec2,
+    /// Bounding box diagonal, pixels.
+    pub diagonal_px: f32,
+    /// Direction of largest spread.
+    pub principal: Vec2,
+    /// Spread along the principal direction over the spread across it (>= 1).
+    pub elongation: f32,
+}
+
+impl MaskShape {
+    /// The shape of `mask`; an empty mask is an error.
+    pub fn new(mask: &Mask) -> Result<Self> {
+        let points: Vec<Vec2> = mask
+            .inside
+            .iter()
+            .enumerate()
+            .filter(|(_, inside)| **inside)
+            .map(|(i, _)| Vec2::new((i % mask.width) as f32 + 0.5, (i / mask.width) as f32 + 0.5))
+            .collect();
+        if points.is_empty() {
+            return Err(RenderError::value("mask", "is empty: no pixel marks the probe"));
+        }
+        let n = points.len() as f32;
+        let barycenter = points.iter().sum::<Vec2>() / n;
+        let (lo, hi) = points.iter().fold(
+            (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        );
+        let (mut sxx, mut sxy, mut syy) = (0.0f32, 0.0f32, 0.0f32);
+        for p in &points {
+            let d = *p - barycenter;
+            sxx += d.x * d.x / n;
+            sxy += d.x * d.y / n;
+            syy += d.y * d.y / n;
+        }
+        // Eigen-decomposition of the 2x2 covariance.
+        let half_trace = 0.5 * (sxx + syy);
+        let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+        let (major, minor) = (half_trace + root, (half_trace - root).max(1e-6));
+        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+        Ok(MaskShape {
+            barycenter,
+            diagonal_px: (hi - lo + Vec2::ONE).length(),
+            principal: Vec2::new(angle.cos(), angle.sin()),
+            elongation: (major / minor).sqrt(),
+        })
+    }
+}
+
+/// Directions closer than this (degrees) are one axis hypothesis.
+const SAME_AXIS_DEG: f32 = 15.0;
+
+/// A mask rounder than this (spread ratio) shows no principal direction.
+const ROUND_MASK: f32 = 1.15;
+
+/// Where the probe's axis (mesh +Y) may point in the world, from what the
+/// mask shows and the probe's proportions: upright (along the camera's
+/// `up`); for an elongated mask, along the image direction the axis shows
+/// as (the mask's principal direction for a probe longer than wide, the
+/// direction across it for one wider than long, both when neither), both
+/// ways, either in the image plane or lying on a horizontal surface (the
+/// same image direction, horizontal in the world); for a round mask, along
+/// the view ray both ways (a probe seen end-on). Hypotheses within
+/// [`SAME_AXIS_DEG`] of an earlier one are left out.
+pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh) -> Vec<Vec3> {
+    let up = camera.up.normalize();
+    let ray = camera.direction_through(shape.barycenter);
+    let mut candidates = vec![up];
+    if shape.elongation > ROUND_MASK {
+        let (lo, hi) = mesh.bounds();
+        let (length, width) = (hi.y - lo.y, (hi.x - lo.x).max(hi.z - lo.z));
+        let across = Vec2::new(-shape.principal.y, shape.principal.x);
+        let directions = if length > ROUND_MASK * width {
+            vec![shape.principal]
+        } else if width > ROUND_MASK * length {
+            vec![across]
+        } else {
+            vec![shape.principal, across]
+        };
+        for image_dir in directions {
+            // Image y grows downwards.
+            let d = camera.right * image_dir.x - camera.image_up * image_dir.y;
+            let in_plane = (d - ray * ray.dot(d)).normalize();
+            candidates.extend([in_plane, -in_plane]);
+            let lying = ray.cross(d).cross(up);
+            if lying.length() > 1e-3 {
+                let lying = lying.normalize() * lying.dot(d).signum();
+                candidates.extend([lying, -lying]);
+            }
+        }
+    } else {
+        candidates.extend([-ray, ray]);
+    }
+    let cos_same = SAME_AXIS_DEG.to_radians().cos();
+    let mut axes: Vec<Vec3> = Vec::new();
+    for c in candidates {
+        if c.is_finite() && axes.iter().all(|a| a.dot(c) < cos_same) {
+            axes.push(c);
+        }
+    }
+    axes
+}
+
+/// The starting pose with the probe's axis along `axis`, facing the camera:
+/// the depth from the probe's known size, as it shows in that orientation,
+/// against the mask's extent; the position on the mask's barycenter.
+pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3) -> Pose {
+    let rotation = facing(camera, axis);
+    // The extent of the turned mesh across the view (orthographic: the
+    // probe is small against its distance).
     let (lo, hi) = mesh.positions.iter().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)),
+        |(lo, hi), &p| {
+            let q = rotation * p;
+            let on_image = Vec2::new(camera.right.dot(q), camera.image_up.dot(q));
+            (lo.min(on_image), hi.max(on_image))
+        },
     );
-    let centre = 0.5 * (lo + hi);
     let diagonal_m = (hi - lo).length();
     let focal_px = 0.5 * camera.height as f32 / (0.5 * camera.fov_y_deg.to_radians()).tan();
-    let depth = focal_px * diagonal_m / diagonal_px;
-    let dir = camera.direction_through(barycenter);
-    let rotation = front_facing(camera) * Quat::from_rotation_y(yaw_deg.to_radians());
+    let depth = focal_px * diagonal_m / shape.diagonal_px;
+    let (mesh_lo, mesh_hi) = mesh.bounds();
+    let centre = 0.5 * (mesh_lo + mesh_hi);
+    let dir = camera.direction_through(shape.barycenter);
     let translation = camera.origin + dir * (depth / dir.dot(camera.forward)) - rotation * centre;
-    Ok(Pose::new(rotation, 1.0, translation))
+    Pose::new(rotation, 1.0, translation)
+}
+
+/// `pose` turned by `yaw_deg` about the probe's own axis through the centre
+/// of its bounding box (which stays in place).
+pub fn turned(pose: &Pose, mesh: &Mesh, yaw_deg: f32) -> Pose {
+    let (lo, hi) = mesh.bounds();
+    let centre = pose.transform_point(0.5 * (lo + hi));
+    let turn = Quat::from_axis_angle((pose.rotation * Vec3::Y).normalize(), yaw_deg.to_radians());
+    let rotation = (turn * pose.rotation).normalize();
+    let translation = centre - rotation * (pose.scale * 0.5 * (lo + hi));
+    Pose::new(rotation, pose.scale, translation)
 }
 
 #[cfg(test)]
@@ -84,17 +206,74 @@ mod tests {
             &GgxMetal,
             &RenderSettings { spp: 1, seed: 0 },
         );
-        let start = initial_pose(&probe.mesh, &camera, &mask, 0.0).expect("a start");
+        let shape = MaskShape::new(&mask).expect("a mask");
+        let start = initial_pose(&probe.mesh, &camera, &shape, camera.up);
         let centre = Vec3::new(0.0, 0.061, 0.0);
         let err = (start.transform_point(centre) - truth.transform_point(centre)).length();
-        // Measured 0.028 m on the mask of coverage >= 1/2 (render_image samples
-        // silhouette pixels 4x); a 1-sample mask, whose bounding box reaches
-        // further out, gave 0.015 m.
-        assert!(err < 0.035, "start is {err} m from the truth");
+        // Measured 0.013 m with the depth from the extent the turned mesh
+        // shows (0.028 m from the mesh's 3D bounding box diagonal).
+        assert!(err < 0.02, "start is {err} m from the truth");
         let axis = start.rotation * Vec3::Y;
         assert!(
             axis.dot(truth.rotation * Vec3::Y) > 0.95,
             "the start stands upright: {axis}"
         );
+    }
+
+    /// The can's mask from `camera` at `truth`.
+    fn can_mask(probe: &render::probe::ProbeAsset, camera: &Camera, truth: &Pose) -> Mask {
+        let env = EnvMap::constant(8, [1.0; 3]);
+        render_image(probe, truth, camera, &env, &GgxMetal, &RenderSettings { spp: 1, seed: 0 }).1
+    }
+
+    #[test]
+    fn one_axis_hypothesis_is_near_the_truth_whether_the_can_stands_lies_or_leans() {
+        let probe = SodaCan::default().build();
+        let camera = Camera::new(
+            160,
+            120,
+            40.0,
+            Vec3::new(0.0, 0.25, 0.45),
+            Vec3::new(0.0, 0.03, 0.0),
+            Vec3::Y,
+        )
+        .expect("camera");
+        // Upright; lying on the table at three headings; leaning towards the
+        // image's side; lying towards the camera (seen nearly end-on).
+        let lying = |heading: f32| Quat::from_rotation_y(heading) * Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
+        let cases = [
+            ("upright", Quat::IDENTITY),
+            ("lying across", lying(0.0)),
+            ("lying at 40 deg", lying(0.7)),
+            ("lying at -60 deg", lying(-1.05)),
+            ("leaning", Quat::from_rotation_z(0.6)),
+            ("lying end-on", Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+        ];
+        for (name, rotation) in cases {
+            let truth = Pose::new(rotation, 1.0, Vec3::new(0.0, 0.035, 0.0) - rotation * Vec3::new(0.0, 0.061, 0.0));
+            let mask = can_mask(&probe, &camera, &truth);
+            let shape = MaskShape::new(&mask).expect("a mask");
+            let axes = axis_hypotheses(&camera, &shape, &probe.mesh);
+            let true_axis = rotation * Vec3::Y;
+            let best = axes
+                .iter()
+                .map(|a| a.dot(true_axis).clamp(-1.0, 1.0).acos().to_degrees())
+                .fold(f32::INFINITY, f32::min);
+            assert!(axes.len() <= 5, "{name}: {} hypotheses", axes.len());
+            assert!(best < 30.0, "{name}: nearest hypothesis {best} deg from the axis ({axes:?})");
+        }
+    }
+
+    #[test]
+    fn a_turn_keeps_the_probe_in_place_and_its_axis() {
+        let probe = SodaCan::default().build();
+        let pose = Pose::new(Quat::from_rotation_x(0.5), 1.3, Vec3::new(0.1, -0.2, 0.3));
+        let (lo, hi) = probe.mesh.bounds();
+        let centre = 0.5 * (lo + hi);
+        let turned = turned(&pose, &probe.mesh, 90.0);
+        assert!((turned.transform_point(centre) - pose.transform_point(centre)).length() < 1e-5);
+        assert!((turned.rotation * Vec3::Y - pose.rotation * Vec3::Y).length() < 1e-5);
+        let side = (turned.rotation * Vec3::X).dot(pose.rotation * Vec3::Z);
+        assert!((side.abs() - 1.0).abs() < 1e-5, "a quarter turn: {side}");
     }
 }

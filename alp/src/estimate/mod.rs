@@ -1,15 +1,23 @@
 //! Single-image estimation of the probe's pose and the scene's lighting
 //! (PAPER.md, "Single-image estimation").
 //!
-//! Per orientation start (yaws about the probe's axis, as the paper's code):
-//! 1. *silhouette*: the pose alone, by Adam on the terms of the objective
-//!    ([`crate::objective`]) that need no rendering: the soft mask's L1 and
-//!    Chamfer losses, the barycenter term and the orientation prior (towards
-//!    the start's own orientation; both decaying to zero), which are defined
-//!    and informative from any start, unlike the image loss;
-//! 2. a quick *lighting* solve at that pose under a coarse, smooth map, and
-//!    the mean RGB angle between re-render and photo that ranks the starts
-//!    (the probe's colour pattern in place or not).
+//! The orientation search, in two stages:
+//! 1. *axes*: where the probe's axis points is hypothesised from the mask
+//!    (upright, along the mask's principal direction in the image plane or
+//!    lying on a horizontal surface, end-on; [`init::axis_hypotheses`]);
+//!    each hypothesis gets the *silhouette* phase: the pose alone, by Adam on
+//!    the terms of the objective ([`crate::objective`]) that need no
+//!    rendering: the soft mask's L1 and Chamfer losses, the barycenter term
+//!    and the orientation prior (towards the hypothesis's own orientation;
+//!    both decaying to zero), which are defined and informative from any
+//!    start, unlike the image loss. The axes whose silhouettes fit (within
+//!    [`AXIS_KEEP_RATIO`] of the best, at most `axes_kept`) go on;
+//! 2. *turns*: each kept pose turned about its axis by the yaw starts (a
+//!    turn the silhouette cannot see is taken as is; one that changes the
+//!    silhouette gets a short silhouette refit), then a quick *lighting*
+//!    solve under a coarse, smooth map and the mean RGB angle between
+//!    re-render and photo, which ranks the starts (the probe's colour
+//!    pattern in place or not).
 //!
 //! Then, from the best start, *joint* refinement by alternation: the pose by
 //! Adam on the whole objective (by default relative L1 on RGB inside the
@@ -81,6 +89,8 @@ pub struct Settings {
     pub env_size: (usize, usize),
     /// Orientation starts: yaw about the probe's axis, degrees.
     pub starts_deg: Vec<f32>,
+    /// Axis hypotheses whose turns are ranked, at most.
+    pub axes_kept: usize,
     /// Adam iterations of the silhouette phase per start.
     pub silhouette_iters: usize,
     /// Alternations of pose (image loss) and lighting (solve).
@@ -105,28 +115,31 @@ pub struct Settings {
 }
 
 impl Settings {
-    /// How many phases a run has: per start a silhouette fit and a ranking
-    /// solve, a lighting solve, two per joint round, and the final solve
-    /// (only the final solve when the pose is known).
+    /// How many phases a run is expected to have before the mask is seen:
+    /// one axis hypothesis (the upright one) with every start turned from
+    /// it, two per joint round, the lighting solve and the final solve
+    /// (only the final solve when the pose is known). The run adds to it as
+    /// it learns more (see [`estimate_with_progress`]).
     pub fn phase_count(&self) -> usize {
         match self.known_pose {
             Some(_) => 1,
-            None => 2 * self.starts_deg.len() + 2 * self.rounds + 2,
+            None => 1 + self.starts_deg.len() + 2 * self.rounds + 2,
         }
     }
 
     /// The preset for `quality`.
     pub fn new(quality: Quality) -> Self {
-        let (starts_deg, silhouette_iters, rounds, pose_iters, spp_pose, spp_final) = match quality {
-            Quality::Fast => (yaws(4), 40, 1, 15, 1, 8),
-            Quality::Default => (yaws(8), 50, 2, 20, 2, 16),
-            Quality::Best => (yaws(12), 100, 3, 40, 4, 64),
+        let (starts_deg, axes_kept, silhouette_iters, rounds, pose_iters, spp_pose, spp_final) = match quality {
+            Quality::Fast => (yaws(4), 2, 40, 1, 15, 1, 8),
+            Quality::Default => (yaws(8), 3, 50, 2, 20, 2, 16),
+            Quality::Best => (yaws(12), 4, 100, 3, 40, 4, 64),
         };
         Settings {
             quality,
             seed: 0,
             env_size: (256, 128),
             starts_deg,
+            axes_kept,
             silhouette_iters,
             rounds,
             pose_iters,
@@ -201,15 +214,55 @@ pub struct PhaseReport {
     pub per_iteration: Vec<Vec<TermReport>>,
     /// Re-rendering PSNR inside the mask, dB (when the phase renders).
     pub psnr_db: Option<f64>,
+    /// The pose a pose phase ended at.
+    pub pose: Option<PoseRecord>,
+}
+
+/// A pose in the report: rotation quaternion (x, y, z, w), scale, translation (m).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct PoseRecord {
+    /// Unit quaternion, x y z w.
+    pub rotation: [f32; 4],
+    /// Uniform scale.
+    pub scale: f32,
+    /// World translation, metres.
+    pub translation: [f32; 3],
+}
+
+impl From<&Pose> for PoseRecord {
+    fn from(pose: &Pose) -> Self {
+        PoseRecord {
+            rotation: pose.rotation.to_array(),
+            scale: pose.scale,
+            translation: pose.translation.to_array(),
+        }
+    }
+}
+
+/// One axis hypothesis's account.
+#[derive(Clone, Debug, Serialize)]
+pub struct AxisReport {
+    /// The hypothesis: where the probe's axis (mesh +Y) points, world.
+    pub axis: [f32; 3],
+    /// The axis after the silhouette phase.
+    pub fitted_axis: [f32; 3],
+    /// Silhouette loss after that phase.
+    pub silhouette_loss: f64,
+    /// Whether its turns were ranked.
+    pub kept: bool,
 }
 
 /// One orientation start's account.
 #[derive(Clone, Debug, Serialize)]
 pub struct StartReport {
-    /// The start's yaw, degrees.
+    /// The axis hypothesis it was turned from (index into the report's axes).
+    pub axis: usize,
+    /// The start's yaw about that axis, degrees.
     pub yaw_deg: f32,
-    /// Silhouette loss after the silhouette phase.
+    /// Silhouette loss of the turned pose (after its refit, if any).
     pub silhouette_loss: f64,
+    /// Whether the turn changed the silhouette enough to be refitted.
+    pub refitted: bool,
     /// Re-rendering PSNR after its quick lighting solve, dB.
     pub psnr_db: f64,
     /// Mean RGB angle between re-render and photo after that solve,
@@ -222,6 +275,8 @@ pub struct StartReport {
 pub struct Report {
     /// The settings used.
     pub settings: Settings,
+    /// Every axis hypothesis.
+    pub axes: Vec<AxisReport>,
     /// Every start.
     pub starts: Vec<StartReport>,
     /// The index of the start kept (none when the pose was given).
@@ -560,6 +615,7 @@ where
         .last()
         .map(|terms: &Vec<TermReport>| terms.iter().map(|t| (t.name.clone(), t.value)).collect())
         .unwrap_or_default();
+    let pose = unpack_pose(&state.best_x);
     let report = PhaseReport {
         name: name.into(),
         iterations: state.iter,
@@ -568,18 +624,38 @@ where
         loss,
         per_iteration,
         psnr_db: None,
+        pose: Some(PoseRecord::from(&pose)),
     };
-    Ok((unpack_pose(&state.best_x), state.best_value, report))
+    Ok((pose, state.best_value, report))
 }
 
-/// The silhouette phase from one start (progress 0 to
-/// [`SILHOUETTE_PROGRESS`]): returns the pose, the final loss and the report.
-fn fit_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings, depth: f32) -> Result<(Pose, f64, PhaseReport)> {
-    let iters = settings.silhouette_iters.max(1);
-    fit_pose("silhouette", start, iters, depth, |tape, pose_vars, eval| {
-        let progress = SILHOUETTE_PROGRESS * (eval as f64 / iters as f64).min(1.0);
-        ctx.evaluate(tape, pose_vars, None, progress, settings.seed.wrapping_add(eval as u64))
+/// A silhouette phase of `iters` iterations from `start`, the objective's
+/// progress running over `progress` (from 0: the decaying priors hold the
+/// start while the silhouette pulls it in; from [`SILHOUETTE_PROGRESS`]:
+/// the silhouette alone): returns the pose, the final loss and the report.
+fn fit_silhouette(
+    ctx: &PoseContext,
+    name: &str,
+    start: Pose,
+    iters: usize,
+    progress: std::ops::Range<f64>,
+    seed: u64,
+) -> Result<(Pose, f64, PhaseReport)> {
+    let iters = iters.max(1);
+    let depth = (start.translation - ctx.photo.camera.origin).length();
+    fit_pose(name, start, iters, depth, |tape, pose_vars, eval| {
+        let t = (eval as f64 / iters as f64).min(1.0);
+        let at = progress.start + t * (progress.end - progress.start);
+        ctx.evaluate(tape, pose_vars, None, at, seed.wrapping_add(eval as u64))
     })
+}
+
+/// The silhouette loss (the objective without rendering, priors spent) at `pose`.
+fn silhouette_loss(ctx: &PoseContext, pose: &Pose, seed: u64) -> Result<f64> {
+    let tape = Tape::<f64>::new();
+    let pose_vars = PoseVars::new(&tape, &pack_pose(pose), false);
+    let evaluation = ctx.evaluate(&tape, &pose_vars, None, SILHOUETTE_PROGRESS, seed)?;
+    Ok(tape.item(evaluation.total))
 }
 
 /// The pose by the whole objective (image and mask terms) under the fixed
@@ -647,6 +723,7 @@ fn lighting_report(name: &str, fit: &LightingFit, started: Instant, psnr_db: f64
         loss: Default::default(),
         per_iteration: Vec::new(),
         psnr_db: Some(psnr_db),
+        pose: None,
     }
 }
 
@@ -671,17 +748,30 @@ fn resample(env: &EnvMap, width: usize, height: usize) -> Result<EnvMap> {
 }
 
 /// What the pose search found: the pose, the lighting fitted there, every
-/// start's account and the index of the start kept.
+/// axis hypothesis's and start's account and the index of the start kept.
 struct PoseSearch {
     pose: Pose,
     fit: LightingFit,
+    axes: Vec<AxisReport>,
     starts: Vec<StartReport>,
     chosen: usize,
 }
 
-/// The pose search: the silhouette phase from every orientation start, the
-/// ranking by re-rendering colour error, then alternation of pose and lighting from
-/// the best start (see the module's description).
+/// Axis hypotheses whose silhouette loss is within this factor of the best
+/// one's are ranked by colour: the silhouette tells a lying probe from a
+/// standing one, not always which end is up.
+const AXIS_KEEP_RATIO: f64 = 1.5;
+
+/// Fitted axes closer than this (degrees) are the same: the worse one goes.
+const SAME_FITTED_AXIS_DEG: f32 = 5.0;
+
+/// A turn whose silhouette loss exceeds the unturned pose's by this factor
+/// changes the silhouette (a probe not symmetric about its axis) and is refitted.
+const TURN_REFIT_RATIO: f64 = 1.2;
+
+/// The pose search (see the module's description): axis hypotheses by
+/// silhouette, their turns ranked by re-rendering colour error, then
+/// alternation of pose and lighting from the best start.
 fn search_pose(
     probe: &Probe,
     photo: &Photo,
@@ -700,6 +790,9 @@ fn search_pose(
         clipped,
         level: mask_mean_luminance(&photo.image, &photo.mask)?,
     };
+    if settings.starts_deg.is_empty() {
+        return Err(RenderError::value("starts", "at least one orientation start is needed"));
+    }
     // The objective's smoothness weight (applied by the linear solve) while
     // the pose is searched: a detailed map would explain a misplaced texture
     // away (texture baked into the light) and hide the pose error from the
@@ -709,24 +802,78 @@ fn search_pose(
         spp: settings.spp_pose,
         seed: settings.seed,
     };
-    // The starts are independent and each one's small pose tapes keep about
-    // one core busy: they run side by side (results do not depend on the
-    // thread count; reports keep the starts' order).
-    let fitted: Vec<Result<_>> = settings
-        .starts_deg
+    let mesh = &probe.asset.mesh;
+    let shape = init::MaskShape::new(&photo.mask)?;
+    let hypotheses = init::axis_hypotheses(&photo.camera, &shape, mesh);
+    phases.expect_more(hypotheses.len() - 1);
+    // Hypotheses and starts are independent and each one's small pose tapes
+    // keep about one core busy: they run side by side (results do not
+    // depend on the thread count; reports keep their order). The
+    // orientation prior holds each near its own orientation: a prior
+    // towards one orientation would pull every start there.
+    let fitted: Vec<Result<_>> = hypotheses
         .par_iter()
-        .map(|&yaw| {
-            let start = init::initial_pose(&probe.asset.mesh, &photo.camera, &photo.mask, yaw)?;
-            let depth = (start.translation - photo.camera.origin).length();
-            // The orientation prior holds each start near its own yaw: the
-            // silhouette of a probe symmetric about its axis says nothing
-            // about the yaw, and a prior towards one yaw would pull every
-            // start there.
-            let start_ctx = PoseContext {
+        .map(|&axis| {
+            let start = init::initial_pose(mesh, &photo.camera, &shape, axis);
+            let own = PoseContext {
                 front_facing: start.rotation,
                 ..ctx
             };
-            let (pose, sil_loss, silhouette) = fit_silhouette(&start_ctx, start, settings, depth)?;
+            let progress = 0.0..SILHOUETTE_PROGRESS;
+            fit_silhouette(&own, "silhouette", start, settings.silhouette_iters, progress, settings.seed)
+        })
+        .collect();
+    let mut axes = Vec::new();
+    let mut axis_poses = Vec::new();
+    for (result, axis) in fitted.into_iter().zip(&hypotheses) {
+        let (pose, loss, report) = result?;
+        phases.push(report);
+        axes.push(AxisReport {
+            axis: axis.to_array(),
+            fitted_axis: (pose.rotation * Vec3::Y).to_array(),
+            silhouette_loss: loss,
+            kept: false,
+        });
+        axis_poses.push((pose, loss));
+    }
+    let mut order: Vec<usize> = (0..axes.len()).collect();
+    order.sort_by(|&a, &b| axes[a].silhouette_loss.total_cmp(&axes[b].silhouette_loss));
+    let best_loss = axes[order[0]].silhouette_loss;
+    let cos_same = SAME_FITTED_AXIS_DEG.to_radians().cos();
+    let mut kept: Vec<usize> = Vec::new();
+    for &a in &order {
+        let axis = Vec3::from_array(axes[a].fitted_axis);
+        let distinct = kept
+            .iter()
+            .all(|&k| Vec3::from_array(axes[k].fitted_axis).dot(axis) < cos_same);
+        if kept.len() < settings.axes_kept.max(1) && axes[a].silhouette_loss <= AXIS_KEEP_RATIO * best_loss && distinct {
+            kept.push(a);
+        }
+    }
+    kept.iter().for_each(|&k| axes[k].kept = true);
+    phases.expect_more((kept.len() - 1) * settings.starts_deg.len());
+    let turns: Vec<(usize, f32)> = kept
+        .iter()
+        .flat_map(|&a| settings.starts_deg.iter().map(move |&yaw| (a, yaw)))
+        .collect();
+    let ranked: Vec<Result<_>> = turns
+        .par_iter()
+        .map(|&(a, yaw)| {
+            let (axis_pose, axis_loss) = axis_poses[a];
+            let turned = init::turned(&axis_pose, mesh, yaw);
+            let own = PoseContext {
+                front_facing: turned.rotation,
+                ..ctx
+            };
+            let loss = silhouette_loss(&own, &turned, settings.seed)?;
+            let (pose, loss, refit) = if loss > TURN_REFIT_RATIO * axis_loss {
+                let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
+                let iters = settings.silhouette_iters / 2;
+                let (pose, loss, report) = fit_silhouette(&own, "silhouette_turn", turned, iters, progress, settings.seed)?;
+                (pose, loss, Some(report))
+            } else {
+                (turned, loss, None)
+            };
             let t1 = Instant::now();
             // Ranked under a coarse, smooth map: a wrong orientation puts the
             // probe's texture in the wrong place, which only a detailed map
@@ -735,27 +882,33 @@ fn search_pose(
             let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
             let ranking = lighting_report("lighting_ranking", &coarse, t1, score);
             let account = StartReport {
+                axis: a,
                 yaw_deg: yaw,
-                silhouette_loss: sil_loss,
+                silhouette_loss: loss,
+                refitted: refit.is_some(),
                 psnr_db: score,
                 rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
             };
-            Ok((silhouette, ranking, account, (pose, depth)))
+            Ok((refit, ranking, account, pose))
         })
         .collect();
     let mut starts = Vec::new();
     let mut candidates = Vec::new();
-    for result in fitted {
-        let (silhouette, ranking, account, candidate) = result?;
-        phases.push(silhouette);
+    for result in ranked {
+        let (refit, ranking, account, pose) = result?;
+        if let Some(refit) = refit {
+            phases.expect_more(1);
+            phases.push(refit);
+        }
         phases.push(ranking);
         starts.push(account);
-        candidates.push(candidate);
+        candidates.push(pose);
     }
     let chosen = (0..starts.len())
         .min_by(|&a, &b| starts[a].rgb_angle_deg.total_cmp(&starts[b].rgb_angle_deg))
-        .ok_or_else(|| RenderError::value("starts", "at least one orientation start is needed"))?;
-    let (mut pose, depth) = candidates[chosen];
+        .expect("at least one start");
+    let mut pose = candidates[chosen];
+    let depth = (pose.translation - photo.camera.origin).length();
     // The working-resolution map only for the start kept.
     let t1 = Instant::now();
     let mut fit = fit_lighting(probe, photo, &pose, work, &quick, clipped, search_smoothness, None)?;
@@ -791,36 +944,47 @@ fn search_pose(
     Ok(PoseSearch {
         pose,
         fit,
+        axes,
         starts,
         chosen,
     })
 }
 
-/// The phases done so far, each announced as it ends.
+/// The phases done so far, each announced as it ends with the count done
+/// and the count now expected.
 struct PhaseLog<'a> {
     phases: Vec<PhaseReport>,
-    on_phase: &'a mut dyn FnMut(&PhaseReport),
+    expected: usize,
+    on_phase: &'a mut dyn FnMut(&PhaseReport, usize, usize),
 }
 
 impl PhaseLog<'_> {
     fn push(&mut self, phase: PhaseReport) {
-        (self.on_phase)(&phase);
+        self.expected = self.expected.max(self.phases.len() + 1);
+        (self.on_phase)(&phase, self.phases.len() + 1, self.expected);
         self.phases.push(phase);
+    }
+
+    /// The run found `more` phases to do than planned.
+    fn expect_more(&mut self, more: usize) {
+        self.expected += more;
     }
 }
 
 /// Estimates the pose and the lighting from `photo` of `probe`.
 pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Result<Estimate> {
-    estimate_with_progress(photo, asset, settings, &mut |_| {})
+    estimate_with_progress(photo, asset, settings, &mut |_, _, _| {})
 }
 
-/// [`estimate`], calling `on_phase` as each phase ends (of
-/// [`Settings::phase_count`] in all): what a progress bar follows.
+/// [`estimate`], calling `on_phase(phase, done, expected)` as each phase
+/// ends: what a progress bar follows. `expected` starts at
+/// [`Settings::phase_count`] and grows as the run learns how many axis
+/// hypotheses and refits the photo needs.
 pub fn estimate_with_progress(
     photo: &Photo,
     asset: &ProbeAsset,
     settings: &Settings,
-    on_phase: &mut dyn FnMut(&PhaseReport),
+    on_phase: &mut dyn FnMut(&PhaseReport, usize, usize),
 ) -> Result<Estimate> {
     let t0 = Instant::now();
     let (out_w, out_h) = settings.env_size;
@@ -841,13 +1005,14 @@ pub fn estimate_with_progress(
     let work = (2 * work_h, work_h);
     let mut phases = PhaseLog {
         phases: Vec::new(),
+        expected: settings.phase_count(),
         on_phase,
     };
-    let (pose, fit, starts, chosen) = match settings.known_pose {
-        Some(pose) => (pose, None, Vec::new(), None),
+    let (pose, fit, axes, starts, chosen) = match settings.known_pose {
+        Some(pose) => (pose, None, Vec::new(), Vec::new(), None),
         None => {
             let search = search_pose(&probe, photo, &reference, &clipped, work, settings, &mut phases)?;
-            (search.pose, Some(search.fit), search.starts, Some(search.chosen))
+            (search.pose, Some(search.fit), search.axes, search.starts, Some(search.chosen))
         }
     };
     let t1 = Instant::now();
@@ -875,6 +1040,7 @@ pub fn estimate_with_progress(
     let rerender = fit.hits.to_image([&channels[0], &channels[1], &channels[2]]);
     let report = Report {
         settings: settings.clone(),
+        axes,
         starts,
         chosen_start: chosen,
         working_resolution: work,
