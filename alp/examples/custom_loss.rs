@@ -60,7 +60,10 @@ fn main() -> Result<()> {
         for r in reports {
             println!(
                 "  {:<18} {:>8.4} {:>12.4e} {:>12.4e}",
-                r.name, r.weight, r.value, r.gradient_norm
+                r.name,
+                r.weight,
+                r.value,
+                r.gradient_norm.unwrap_or(f64::NAN)
             );
         }
     }

@@ -223,7 +223,15 @@ mod tests {
     /// The can's mask from `camera` at `truth`.
     fn can_mask(probe: &render::probe::ProbeAsset, camera: &Camera, truth: &Pose) -> Mask {
         let env = EnvMap::constant(8, [1.0; 3]);
-        render_image(probe, truth, camera, &env, &GgxMetal, &RenderSettings { spp: 1, seed: 0 }).1
+        render_image(
+            probe,
+            truth,
+            camera,
+            &env,
+            &GgxMetal,
+            &RenderSettings { spp: 1, seed: 0 },
+        )
+        .1
     }
 
     #[test]
@@ -250,7 +258,11 @@ mod tests {
             ("lying end-on", Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
         ];
         for (name, rotation) in cases {
-            let truth = Pose::new(rotation, 1.0, Vec3::new(0.0, 0.035, 0.0) - rotation * Vec3::new(0.0, 0.061, 0.0));
+            let truth = Pose::new(
+                rotation,
+                1.0,
+                Vec3::new(0.0, 0.035, 0.0) - rotation * Vec3::new(0.0, 0.061, 0.0),
+            );
             let mask = can_mask(&probe, &camera, &truth);
             let shape = MaskShape::new(&mask).expect("a mask");
             let axes = axis_hypotheses(&camera, &shape, &probe.mesh);
@@ -260,7 +272,10 @@ mod tests {
                 .map(|a| a.dot(true_axis).clamp(-1.0, 1.0).acos().to_degrees())
                 .fold(f32::INFINITY, f32::min);
             assert!(axes.len() <= 5, "{name}: {} hypotheses", axes.len());
-            assert!(best < 30.0, "{name}: nearest hypothesis {best} deg from the axis ({axes:?})");
+            assert!(
+                best < 30.0,
+                "{name}: nearest hypothesis {best} deg from the axis ({axes:?})"
+            );
         }
     }
 

@@ -7,19 +7,23 @@
 
 use glam::Vec3;
 use optim::{Bounds, Lbfgs, Solver};
+use rayon::prelude::*;
 use render::envmap::direction_to_uv;
 
-/// One light sample: its pixel, throughput, and the four texels it reads.
+/// One entry of the transport: a texel and the RGB weight with which it
+/// reaches a pixel (or, in the column copy, a pixel it reaches).
 #[derive(Clone, Copy, Debug)]
-struct Tap {
-    segment: u32,
-    throughput: [f32; 3],
-    texel: [u32; 4],
-    weight: [f32; 4],
+struct Entry {
+    index: u32,
+    weight: [f32; 3],
 }
 
 /// The linear map from an env map (texel-major RGB at `width x height`) to
-/// the probe's pixels.
+/// the probe's pixels, as a sparse matrix: per pixel the texels its light
+/// samples read (bilinear taps of every sample merged, so that more samples
+/// per pixel cost memory only where lobes are wide), and per texel the
+/// pixels it reaches (the transposed product gathers instead of scattering:
+/// parallel and independent of the thread count).
 #[derive(Clone, Debug)]
 pub struct Transport {
     /// Env map columns.
@@ -28,7 +32,10 @@ pub struct Transport {
     pub height: usize,
     /// Number of pixels (segments).
     pub pixels: usize,
-    taps: Vec<Tap>,
+    row_start: Vec<usize>,
+    rows: Vec<Entry>,
+    column_start: Vec<usize>,
+    columns: Vec<Entry>,
 }
 
 /// The four texels and weights of a bilinear lookup at direction `d`
@@ -65,25 +72,39 @@ impl Transport {
             width == 2 * height && height > 0,
             "Transport: env maps are 2:1, got {width}x{height}"
         );
-        let taps = segment
-            .iter()
-            .zip(wi)
-            .zip(throughput)
-            .map(|((&segment, &d), &throughput)| {
-                let (texel, weight) = bilinear_taps(d, width, height);
-                Tap {
-                    segment,
-                    throughput,
-                    texel,
-                    weight,
+        // (pixel, texel, weight) of every tap, merged per (pixel, texel).
+        let mut taps: Vec<(u32, u32, [f32; 3])> = Vec::with_capacity(4 * segment.len());
+        for ((&pixel, &d), &t) in segment.iter().zip(wi).zip(throughput) {
+            let (texels, weights) = bilinear_taps(d, width, height);
+            for (&texel, &w) in texels.iter().zip(&weights) {
+                if w > 0.0 {
+                    taps.push((pixel, texel, t.map(|c| c * w)));
                 }
-            })
-            .collect();
+            }
+        }
+        taps.sort_unstable_by_key(|&(pixel, texel, _)| (pixel, texel));
+        let mut merged: Vec<(u32, u32, [f32; 3])> = Vec::with_capacity(taps.len());
+        for (pixel, texel, w) in taps {
+            match merged.last_mut() {
+                Some(last) if last.0 == pixel && last.1 == texel => (0..3).for_each(|c| last.2[c] += w[c]),
+                _ => merged.push((pixel, texel, w)),
+            }
+        }
+        let (row_start, rows) = compressed(&merged, pixels, |&(pixel, texel, weight)| {
+            (pixel, Entry { index: texel, weight })
+        });
+        merged.sort_by_key(|&(pixel, texel, _)| (texel, pixel));
+        let (column_start, columns) = compressed(&merged, width * height, |&(pixel, texel, weight)| {
+            (texel, Entry { index: pixel, weight })
+        });
         Transport {
             width,
             height,
             pixels,
-            taps,
+            row_start,
+            rows,
+            column_start,
+            columns,
         }
     }
 
@@ -94,42 +115,95 @@ impl Transport {
 
     /// The pixels' radiance under `env` (texel-major RGB).
     pub fn apply(&self, env: &[f64], out: &mut [[f64; 3]]) {
-        out.iter_mut().for_each(|p| *p = [0.0; 3]);
-        for tap in &self.taps {
-            let px = &mut out[tap.segment as usize];
-            for (&t, &w) in tap.texel.iter().zip(&tap.weight) {
+        out.par_iter_mut().enumerate().for_each(|(p, px)| {
+            *px = [0.0; 3];
+            for e in &self.rows[self.row_start[p]..self.row_start[p + 1]] {
                 for c in 0..3 {
-                    px[c] += (tap.throughput[c] * w) as f64 * env[t as usize * 3 + c];
+                    px[c] += e.weight[c] as f64 * env[e.index as usize * 3 + c];
                 }
             }
-        }
+        });
     }
 
     /// `grad += A^T residual` for per-pixel RGB residuals.
     pub fn apply_transpose(&self, residual: &[[f64; 3]], grad: &mut [f64]) {
-        for tap in &self.taps {
-            let r = residual[tap.segment as usize];
-            for (&t, &w) in tap.texel.iter().zip(&tap.weight) {
+        grad.par_chunks_exact_mut(3).enumerate().for_each(|(t, g)| {
+            for e in &self.columns[self.column_start[t]..self.column_start[t + 1]] {
+                let r = residual[e.index as usize];
                 for c in 0..3 {
-                    grad[t as usize * 3 + c] += (tap.throughput[c] * w) as f64 * r[c];
+                    g[c] += e.weight[c] as f64 * r[c];
                 }
             }
-        }
+        });
     }
 
-    /// How often each texel is read, weighted by the samples' throughput
-    /// luminance, normalised to a maximum of 1: the paper's confidence map.
+    /// How strongly each texel reaches the pixels (the summed luminance of
+    /// its weights), normalised to a maximum of 1: the paper's sampling
+    /// frequency, our confidence map.
     pub fn confidence(&self) -> Vec<f32> {
-        let mut freq = vec![0.0f64; self.width * self.height];
-        for tap in &self.taps {
-            let lum = (0.2126 * tap.throughput[0] + 0.7152 * tap.throughput[1] + 0.0722 * tap.throughput[2]) as f64;
-            for (&t, &w) in tap.texel.iter().zip(&tap.weight) {
-                freq[t as usize] += w as f64 * lum;
-            }
-        }
+        let freq: Vec<f64> = (0..self.width * self.height)
+            .map(|t| {
+                self.columns[self.column_start[t]..self.column_start[t + 1]]
+                    .iter()
+                    .map(|e| (0.2126 * e.weight[0] + 0.7152 * e.weight[1] + 0.0722 * e.weight[2]) as f64)
+                    .sum()
+            })
+            .collect();
         let max = freq.iter().cloned().fold(0.0, f64::max).max(1e-30);
         freq.iter().map(|&f| (f / max) as f32).collect()
     }
+}
+
+/// Compressed rows of `items` sorted by the key `entry` returns first:
+/// `start[k]..start[k + 1]` holds row k's entries, for `count` rows.
+fn compressed<T>(items: &[T], count: usize, entry: impl Fn(&T) -> (u32, Entry)) -> (Vec<usize>, Vec<Entry>) {
+    let mut start = vec![0usize; count + 1];
+    let mut entries = Vec::with_capacity(items.len());
+    for item in items {
+        let (row, e) = entry(item);
+        start[row as usize + 1] += 1;
+        entries.push(e);
+    }
+    for k in 0..count {
+        start[k + 1] += start[k];
+    }
+    (start, entries)
+}
+
+/// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
+/// doubling from `coarsest` (or `size` itself when not larger).
+pub fn pyramid(size: (usize, usize), coarsest: usize) -> Vec<(usize, usize)> {
+    let mut heights = vec![size.1];
+    while heights[0] / 2 >= coarsest && heights[0] % 2 == 0 {
+        heights.insert(0, heights[0] / 2);
+    }
+    heights.into_iter().map(|h| (2 * h, h)).collect()
+}
+
+/// Bilinear resampling of a texel-major RGB map from size `from` to `to`
+/// (FORMATS.md lookups: texel centres at +0.5, wrap in u, clamp in v).
+pub fn upsample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec<f64> {
+    if from == to {
+        return texels.to_vec();
+    }
+    let mut out = Vec::with_capacity(to.0 * to.1 * 3);
+    for r in 0..to.1 {
+        for c in 0..to.0 {
+            let u = (c as f32 + 0.5) / to.0 as f32;
+            let v = (r as f32 + 0.5) / to.1 as f32;
+            let d = render::envmap::uv_to_direction(glam::Vec2::new(u, v));
+            let (taps, weights) = bilinear_taps(d, from.0, from.1);
+            for ch in 0..3 {
+                out.push(
+                    taps.iter()
+                        .zip(&weights)
+                        .map(|(&t, &w)| w as f64 * texels[t as usize * 3 + ch])
+                        .sum(),
+                );
+            }
+        }
+    }
+    out
 }
 
 /// Settings of the lighting solve.
@@ -137,14 +211,22 @@ impl Transport {
 pub struct LightingSolve {
     /// Weight of the smoothness term (relative to the data term, scale-free).
     pub smoothness: f64,
+    /// Whether neighbour differences count relative to the start's local
+    /// radiance level (else in absolute terms).
+    pub relative_smoothness: bool,
     /// L-BFGS iterations at most.
     pub max_iters: usize,
 }
 
+/// Texels darker than this fraction of the start's mean level count as
+/// that level in the relative smoothness (no division by zero radiance).
+const DARK_LEVEL: f64 = 0.05;
+
 /// Solves `min_x>=0 sum_p w_p |A x - b_p|^2 / sum w + lambda R(x)` where
 /// `R` penalises squared differences of neighbouring texels (area-weighted,
-/// divided by the target's mean square so that `lambda` is scale-free):
-/// texels the probe sees poorly are filled from confident neighbours.
+/// relative to the local level of the start `x0`, and divided by the
+/// target's mean square so that `lambda` is scale-free): texels the probe
+/// sees poorly are filled from confident neighbours.
 /// Returns the env map (texel-major RGB) and the L-BFGS evaluation count.
 pub fn solve(
     transport: &Transport,
@@ -164,15 +246,32 @@ pub fn solve(
         .sum::<f64>()
         / weight_sum;
     let lambda = settings.smoothness / mean_sq.max(1e-30) / (w * h) as f64;
+    // Differences may count relative to the local radiance level of the
+    // start (a bright light's edge is no rougher than a dark wall's texture).
+    let level: Vec<f64> = x0
+        .chunks_exact(3)
+        .map(|t| 0.2126 * t[0] + 0.7152 * t[1] + 0.0722 * t[2])
+        .collect();
+    let mean_level = level.iter().sum::<f64>() / level.len() as f64;
+    let floor = DARK_LEVEL * mean_level;
+    let relative = |i: usize, j: usize| -> f64 {
+        let m = 0.5 * (level[i] + level[j]) + floor;
+        match settings.relative_smoothness {
+            true => ((mean_level + floor) / m.max(1e-30)).powi(2),
+            false => 1.0,
+        }
+    };
     // Neighbour pairs with their area weight sin(theta).
     let mut pairs = Vec::with_capacity(2 * w * h);
     for r in 0..h {
         let area = (std::f64::consts::PI * (r as f64 + 0.5) / h as f64).sin();
         for c in 0..w {
             let i = r * w + c;
-            pairs.push((i, r * w + (c + 1) % w, area));
+            let j = r * w + (c + 1) % w;
+            pairs.push((i, j, area * relative(i, j)));
             if r + 1 < h {
-                pairs.push((i, (r + 1) * w + c, area));
+                let j = (r + 1) * w + c;
+                pairs.push((i, j, area * relative(i, j)));
             }
         }
     }
@@ -238,6 +337,53 @@ mod tests {
     }
 
     #[test]
+    fn the_transport_renders_what_the_samples_read_and_its_transpose_is_its_adjoint() {
+        let (w, h, pixels) = (16, 8, 5);
+        let env: Vec<f64> = (0..w * h * 3).map(|i| 0.2 + ((i * 37) % 11) as f64 * 0.1).collect();
+        let texels: Vec<[f32; 3]> = env
+            .chunks_exact(3)
+            .map(|t| [t[0] as f32, t[1] as f32, t[2] as f32])
+            .collect();
+        let map = EnvMap::new(w, h, texels).expect("env");
+        // Several samples per pixel, some reading the same texels (merged).
+        let (mut segment, mut wi, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..60u32 {
+            let uv = glam::Vec2::new((k as f32 * 0.137).fract(), (k as f32 * 0.291).fract());
+            segment.push(k % pixels as u32);
+            wi.push(uv_to_direction(uv));
+            throughput.push([0.5 + 0.01 * k as f32, 0.3, 0.1]);
+        }
+        let transport = Transport::new(&segment, &wi, &throughput, pixels, w, h);
+        let mut rendered = vec![[0.0; 3]; pixels];
+        transport.apply(&env, &mut rendered);
+        let mut want = vec![[0.0f64; 3]; pixels];
+        for ((&p, &d), t) in segment.iter().zip(&wi).zip(&throughput) {
+            let l = map.lookup(d);
+            (0..3).for_each(|c| want[p as usize][c] += (t[c] * l[c]) as f64);
+        }
+        for (a, b) in rendered.iter().zip(&want) {
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() < 1e-3 * b[c].abs().max(1.0), "{a:?} vs {b:?}");
+            }
+        }
+        let residual: Vec<[f64; 3]> = (0..pixels)
+            .map(|p| [p as f64 - 2.0, 0.5, 1.0 / (p as f64 + 1.0)])
+            .collect();
+        let mut grad = vec![0.0; transport.unknowns()];
+        transport.apply_transpose(&residual, &mut grad);
+        let lhs: f64 = rendered
+            .iter()
+            .zip(&residual)
+            .map(|(a, r)| (0..3).map(|c| a[c] * r[c]).sum::<f64>())
+            .sum();
+        let rhs: f64 = env.iter().zip(&grad).map(|(x, g)| x * g).sum();
+        assert!(
+            (lhs - rhs).abs() < 1e-9 * lhs.abs().max(1.0),
+            "<Ax, r> {lhs} vs <x, A^T r> {rhs}"
+        );
+    }
+
+    #[test]
     fn solve_recovers_a_map_the_transport_sees_whole() {
         // Every texel read directly (one sample per texel centre): the solve
         // must give the map back.
@@ -262,6 +408,7 @@ mod tests {
             &vec![1.0; wi.len()],
             LightingSolve {
                 smoothness: 0.0,
+                relative_smoothness: false,
                 max_iters: 500,
             },
             &vec![1.0; w * h * 3],

@@ -279,8 +279,9 @@ pub struct TermReport {
     /// Its unweighted value.
     pub value: f64,
     /// The norm of its weighted gradient, `weight * |d term / d x|`: what it
-    /// contributes to the step.
-    pub gradient_norm: f64,
+    /// contributes to the step (None where not measured: each norm costs a
+    /// backward pass).
+    pub gradient_norm: Option<f64>,
 }
 
 impl Objective {
@@ -442,15 +443,27 @@ impl<'t> Evaluation<'t> {
     pub fn report(&self, wrt: &[Var<'t, f64>]) -> Result<Vec<TermReport>> {
         let norms = self.gradient_norms(wrt)?;
         Ok(self
-            .terms
-            .iter()
+            .value_report()
+            .into_iter()
             .zip(norms)
-            .map(|(t, gradient_norm)| TermReport {
+            .map(|(t, norm)| TermReport {
+                gradient_norm: Some(norm),
+                ..t
+            })
+            .collect())
+    }
+
+    /// Each term's name, weight and value, without the gradient norms (no
+    /// backward pass).
+    pub fn value_report(&self) -> Vec<TermReport> {
+        self.terms
+            .iter()
+            .map(|t| TermReport {
                 name: t.name.clone(),
                 weight: t.weight,
                 value: t.value.tape().item(t.value),
-                gradient_norm,
+                gradient_norm: None,
             })
-            .collect())
+            .collect()
     }
 }
