@@ -252,3 +252,67 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
     assert!(!dir.join("bad").exists(), "nothing is written on a bad objective");
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn estimate_memory_stays_flat_from_one_phase_to_the_next() {
+    let (dir, env) = workspace("estimate-memory");
+    let scene = dir.join("scene");
+    let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let synth_args = [
+        "synth".into(),
+        "--probe".into(),
+        "can".into(),
+        "--env".into(),
+        s(&env),
+        "--out".into(),
+        s(&scene),
+        "--width".into(),
+        "160".into(),
+        "--height".into(),
+        "120".into(),
+        "--spp".into(),
+        "8".into(),
+        "--seed".into(),
+        "7".into(),
+    ];
+    let out = alp(&synth_args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let args = [
+        "estimate".into(),
+        "--image".into(),
+        s(&scene.join("image.exr")),
+        "--mask".into(),
+        s(&scene.join("mask.png")),
+        "--camera".into(),
+        s(&scene.join("camera.json")),
+        "--probe".into(),
+        "can".into(),
+        "--env-size".into(),
+        "64x32".into(),
+        "--out".into(),
+        s(&dir.join("estimate")),
+    ];
+    let out = alp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("estimate/report.json")).expect("report"))
+            .expect("json");
+    let phases = report["phases"].as_array().expect("phases");
+    let resident = |name: &str| -> Vec<f64> {
+        phases
+            .iter()
+            .filter(|p| p["name"] == name)
+            .map(|p| p["resident_mb"].as_f64().expect("resident memory (Linux)"))
+            .collect()
+    };
+    // Every phase of a kind does the same work on fresh tapes: the process
+    // must not grow from one to the next (beyond the allocator's slack).
+    for name in ["silhouette", "lighting_ranking", "pose", "lighting"] {
+        let r = resident(name);
+        assert!(r.len() >= 2, "{name}: {} phases", r.len());
+        let first = r[..r.len() / 2].iter().cloned().fold(0.0, f64::max);
+        let last = r[r.len() - 1];
+        assert!(last <= 1.1 * first + 8.0, "{name}: resident {r:?} MB");
+    }
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}

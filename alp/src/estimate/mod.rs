@@ -216,6 +216,17 @@ pub struct PhaseReport {
     pub psnr_db: Option<f64>,
     /// The pose a pose phase ended at.
     pub pose: Option<PoseRecord>,
+    /// The process's resident memory as the phase ended, MB (where the
+    /// system tells it): flat from one phase of a kind to the next.
+    pub resident_mb: Option<f64>,
+}
+
+/// The process's resident set size, MB (Linux `/proc/self/status`; None elsewhere).
+pub fn resident_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
 }
 
 /// A pose in the report: rotation quaternion (x, y, z, w), scale, translation (m).
@@ -268,6 +279,27 @@ pub struct StartReport {
     /// Mean RGB angle between re-render and photo after that solve,
     /// degrees: what ranks the starts.
     pub rgb_angle_deg: f64,
+    /// Mean relative squared error of that re-render: what ranks starts
+    /// whose colour errors tie (a probe of one colour).
+    pub relative_error: f64,
+    /// Whether the start refines the best yaw (else one of the grid).
+    pub refinement: bool,
+}
+
+/// RGB angles closer than this (degrees) tie.
+const RANK_TIE_DEG: f64 = 0.02;
+
+/// Yaw refinement stops below this step (degrees).
+const YAW_REFINE_DEG: f32 = 2.0;
+
+/// Whether start `a` ranks above start `b`: the smaller colour error, or
+/// on a tie the smaller relative error.
+fn ranks_above(a: &StartReport, b: &StartReport) -> bool {
+    if (a.rgb_angle_deg - b.rgb_angle_deg).abs() > RANK_TIE_DEG {
+        a.rgb_angle_deg < b.rgb_angle_deg
+    } else {
+        a.relative_error < b.relative_error
+    }
 }
 
 /// What `report.json` holds.
@@ -412,6 +444,19 @@ fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[f64]
         if w > 0.0 {
             let f = |v: &[f64; 3]| v.map(|x| x as f32);
             sum += crate::eval::rgb_angle_deg(f(r), f(t));
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f64
+}
+
+/// The weighted mean squared error over weighted pixels (per channel): with
+/// the search's weights, the mean relative squared error.
+fn mean_weighted_sq_error(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[f64]) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for ((r, t), &w) in rendered.iter().zip(target).zip(weight) {
+        if w > 0.0 {
+            sum += w * (0..3).map(|c| (r[c] - t[c]).powi(2)).sum::<f64>() / 3.0;
             n += 1;
         }
     }
@@ -679,6 +724,7 @@ where
         per_iteration,
         psnr_db: None,
         pose: Some(PoseRecord::from(&pose)),
+        resident_mb: resident_mb(),
     };
     Ok((pose, state.best_value, report))
 }
@@ -778,6 +824,7 @@ fn lighting_report(name: &str, fit: &LightingFit, started: Instant, psnr_db: f64
         per_iteration: Vec::new(),
         psnr_db: Some(psnr_db),
         pose: None,
+        resident_mb: resident_mb(),
     }
 }
 
@@ -809,6 +856,29 @@ struct PoseSearch {
     axes: Vec<AxisReport>,
     starts: Vec<StartReport>,
     chosen: usize,
+}
+
+/// A start's refit (if any), ranking phase, account and pose.
+type RankedStart = (Option<PhaseReport>, PhaseReport, StartReport, Pose);
+
+/// Logs ranked starts in order and keeps their accounts and poses.
+fn record(
+    ranked: Vec<Result<RankedStart>>,
+    phases: &mut PhaseLog,
+    starts: &mut Vec<StartReport>,
+    candidates: &mut Vec<Pose>,
+) -> Result<()> {
+    for result in ranked {
+        let (refit, ranking, account, pose) = result?;
+        if let Some(refit) = refit {
+            phases.expect_more(1);
+            phases.push(refit);
+        }
+        phases.push(ranking);
+        starts.push(account);
+        candidates.push(pose);
+    }
+    Ok(())
 }
 
 /// Axis hypotheses whose silhouette loss is within this factor of the best
@@ -918,68 +988,85 @@ fn search_pose(
         .iter()
         .flat_map(|&a| settings.starts_deg.iter().map(move |&yaw| (a, yaw)))
         .collect();
-    let ranked: Vec<Result<_>> = turns
-        .par_iter()
-        .map(|&(a, yaw)| {
-            let (axis_pose, axis_loss) = axis_poses[a];
-            let turned = init::turned(&axis_pose, mesh, yaw);
-            let own = PoseContext {
-                front_facing: turned.rotation,
-                ..ctx
-            };
-            let loss = silhouette_loss(&own, &turned, settings.seed)?;
-            let (pose, loss, refit) = if loss > TURN_REFIT_RATIO * axis_loss {
-                let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
-                let iters = settings.silhouette_iters / 2;
-                let (pose, loss, report) =
-                    fit_silhouette(&own, "silhouette_turn", turned, iters, progress, settings.seed)?;
-                (pose, loss, Some(report))
-            } else {
-                (turned, loss, None)
-            };
-            let t1 = Instant::now();
-            // Ranked under a coarse, smooth map: a wrong orientation puts the
-            // probe's texture in the wrong place, which only a detailed map
-            // could explain away (texture baked into the light).
-            let coarse = fit_lighting(
-                probe,
-                photo,
-                &pose,
-                RANKING_SIZE,
-                &quick,
-                clipped,
-                1.0,
-                LightingPurpose::Search,
-                None,
-            )?;
-            let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
-            let ranking = lighting_report("lighting_ranking", &coarse, t1, score);
-            let account = StartReport {
-                axis: a,
-                yaw_deg: yaw,
-                silhouette_loss: loss,
-                refitted: refit.is_some(),
-                psnr_db: score,
-                rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
-            };
-            Ok((refit, ranking, account, pose))
-        })
-        .collect();
+    // One start: the turned pose, refitted to the silhouette if the turn
+    // changed it, then ranked.
+    let rank_turn = |a: usize, yaw: f32, refinement: bool| -> Result<RankedStart> {
+        let (axis_pose, axis_loss) = axis_poses[a];
+        let turned = init::turned(&axis_pose, mesh, yaw);
+        let own = PoseContext {
+            front_facing: turned.rotation,
+            ..ctx
+        };
+        let loss = silhouette_loss(&own, &turned, settings.seed)?;
+        let (pose, loss, refit) = if loss > TURN_REFIT_RATIO * axis_loss {
+            let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
+            let iters = settings.silhouette_iters / 2;
+            let (pose, loss, report) = fit_silhouette(&own, "silhouette_turn", turned, iters, progress, settings.seed)?;
+            (pose, loss, Some(report))
+        } else {
+            (turned, loss, None)
+        };
+        let t1 = Instant::now();
+        // Ranked under a coarse, smooth map: a wrong orientation puts the
+        // probe's texture in the wrong place, which only a detailed map
+        // could explain away (texture baked into the light).
+        let coarse = fit_lighting(
+            probe,
+            photo,
+            &pose,
+            RANKING_SIZE,
+            &quick,
+            clipped,
+            1.0,
+            LightingPurpose::Search,
+            None,
+        )?;
+        let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
+        let ranking = lighting_report("lighting_ranking", &coarse, t1, score);
+        let account = StartReport {
+            axis: a,
+            yaw_deg: yaw,
+            refinement,
+            silhouette_loss: loss,
+            refitted: refit.is_some(),
+            psnr_db: score,
+            rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
+            relative_error: mean_weighted_sq_error(&coarse.rendered, &coarse.target, &coarse.weight),
+        };
+        Ok((refit, ranking, account, pose))
+    };
     let mut starts = Vec::new();
     let mut candidates = Vec::new();
-    for result in ranked {
-        let (refit, ranking, account, pose) = result?;
-        if let Some(refit) = refit {
-            phases.expect_more(1);
-            phases.push(refit);
-        }
-        phases.push(ranking);
-        starts.push(account);
-        candidates.push(pose);
+    record(
+        turns.par_iter().map(|&(a, yaw)| rank_turn(a, yaw, false)).collect(),
+        phases,
+        &mut starts,
+        &mut candidates,
+    )?;
+    let best_of = |starts: &[StartReport]| {
+        (1..starts.len()).fold(0, |best, k| {
+            if ranks_above(&starts[k], &starts[best]) {
+                k
+            } else {
+                best
+            }
+        })
+    };
+    // The best start's yaw refined by halving steps about it (the starts are
+    // a coarse grid; the image loss alone pulls a turn in only slowly).
+    let mut step = 180.0 / settings.starts_deg.len() as f32;
+    let mut chosen = best_of(&starts);
+    while step >= YAW_REFINE_DEG {
+        let (a, yaw) = (starts[chosen].axis, starts[chosen].yaw_deg);
+        phases.expect_more(2);
+        let ranked = [yaw - step, yaw + step]
+            .par_iter()
+            .map(|&y| rank_turn(a, y, true))
+            .collect();
+        record(ranked, phases, &mut starts, &mut candidates)?;
+        chosen = best_of(&starts);
+        step *= 0.5;
     }
-    let chosen = (0..starts.len())
-        .min_by(|&a, &b| starts[a].rgb_angle_deg.total_cmp(&starts[b].rgb_angle_deg))
-        .expect("at least one start");
     let mut pose = candidates[chosen];
     let depth = (pose.translation - photo.camera.origin).length();
     // The working-resolution map only for the start kept.
