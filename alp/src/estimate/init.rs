@@ -100,7 +100,7 @@ const ROUND_MASK: f32 = 1.15;
 /// ways, either in the image plane or lying on a horizontal surface (the
 /// same image direction, horizontal in the world); for a round mask, along
 /// the view ray both ways (a probe seen end-on). Hypotheses within
-/// [`SAME_AXIS_DEG`] of an earlier one are left out.
+/// `SAME_AXIS_DEG` (15) degrees of an earlier one are left out.
 pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh) -> Vec<Vec3> {
     let up = camera.up.normalize();
     let ray = camera.direction_through(shape.barycenter);

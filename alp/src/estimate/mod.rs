@@ -11,19 +11,21 @@
 //!    and the orientation prior (towards the hypothesis's own orientation;
 //!    both decaying to zero), which are defined and informative from any
 //!    start, unlike the image loss. The axes whose silhouettes fit (within
-//!    [`AXIS_KEEP_RATIO`] of the best, at most `axes_kept`) go on;
+//!    `AXIS_KEEP_RATIO` (1.5) of the best, at most `axes_kept`) go on;
 //! 2. *turns*: each kept pose turned about its axis by the yaw starts (a
 //!    turn the silhouette cannot see is taken as is; one that changes the
 //!    silhouette gets a short silhouette refit), then a quick *lighting*
 //!    solve under a coarse, smooth map and the mean RGB angle between
 //!    re-render and photo, which ranks the starts (the probe's colour
-//!    pattern in place or not).
+//!    pattern in place or not; on a tie, the relative error); the best
+//!    start's yaw is refined by halving steps about it.
 //!
 //! Then, from the best start, *joint* refinement by alternation: the pose by
 //! Adam on the whole objective (by default relative L1 on RGB inside the
-//! mask plus the mask terms) with the lighting fixed, and the lighting by the linear solve at the new
-//! pose (exact for that pose, which thousands of noisy Adam steps are not).
-//! A final solve at more samples per pixel gives the map.
+//! mask plus the mask terms) with the lighting fixed, and the lighting by
+//! the linear solve at the new pose (exact for that pose, which thousands of
+//! noisy Adam steps are not). A final solve at more samples per pixel, with
+//! the output's weighting (`LightingPurpose::Output`), gives the map.
 //!
 //! The env map's working resolution follows what the probe can resolve: its
 //! smallest roughness sets the narrowest lobe (alpha = r^2 radians wide),
