@@ -354,6 +354,10 @@ const RANKING_SIZE: (usize, usize) = (16, 8);
 /// tape's memory grows with them).
 const SPP_PER_PASS: u32 = 16;
 
+/// L-BFGS iterations at most on the levels below the finest of a
+/// coarse-to-fine lighting solve.
+const COARSE_LEVEL_ITERS: usize = 60;
+
 /// The coarsest level of a coarse-to-fine lighting solve (map height).
 const COARSEST_HEIGHT: usize = 8;
 
@@ -618,10 +622,19 @@ fn fit_lighting(
             let mut x = vec![mean.max(1e-6); levels[0].0 * levels[0].1 * 3];
             let (mut evaluations, mut previous) = (0, levels[0]);
             let mut transport = None;
+            let finest = *levels.last().expect("at least one level");
             for level in levels {
                 let x0 = lighting::upsample(&x, previous, level);
                 let t = at(level);
-                let (solved, evals) = lighting::solve(&t, &target, &weight, solve_settings, &x0);
+                // A coarser level only starts the next one.
+                let level_settings = LightingSolve {
+                    max_iters: match level == finest {
+                        true => solve_settings.max_iters,
+                        false => COARSE_LEVEL_ITERS,
+                    },
+                    ..solve_settings
+                };
+                let (solved, evals) = lighting::solve(&t, &target, &weight, level_settings, &x0);
                 (x, previous, transport) = (solved, level, Some(t));
                 evaluations += evals;
             }
