@@ -33,10 +33,30 @@ fn workspace(name: &str) -> (PathBuf, PathBuf) {
 }
 
 fn synth(env: &Path, out: &Path, extra: &[&str]) -> Output {
+    synth_sized(env, out, ("96", "72"), extra)
+}
+
+/// `alp synth` of the can at `size` (width, height), 8 spp.
+fn synth_sized(env: &Path, out: &Path, (width, height): (&str, &str), extra: &[&str]) -> Output {
     let mut args = vec!["synth", "--probe", "can", "--env"];
     args.push(env.to_str().expect("utf-8"));
     args.extend(["--out", out.to_str().expect("utf-8")]);
-    args.extend(["--width", "96", "--height", "72", "--spp", "8"]);
+    args.extend(["--width", width, "--height", height, "--spp", "8"]);
+    args.extend(extra);
+    alp(&args)
+}
+
+/// `alp estimate` of the can in `scene` into `out`, with `extra` options.
+fn estimate(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let (image, mask, camera, out) = (
+        s(&scene.join("image.exr")),
+        s(&scene.join("mask.png")),
+        s(&scene.join("camera.json")),
+        s(out),
+    );
+    let mut args = vec!["estimate", "--image", &image, "--mask", &mask, "--camera", &camera];
+    args.extend(["--probe", "can", "--out", &out]);
     args.extend(extra);
     alp(&args)
 }
@@ -192,27 +212,9 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
     let scene = dir.join("scene");
     assert!(synth(&env, &scene, &["--seed", "5"]).status.success());
     let estimate = |objective: &Path, out: &Path| {
-        let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
-        let args = [
-            "estimate".into(),
-            "--image".into(),
-            s(&scene.join("image.exr")),
-            "--mask".into(),
-            s(&scene.join("mask.png")),
-            "--camera".into(),
-            s(&scene.join("camera.json")),
-            "--probe".into(),
-            "can".into(),
-            "--quality".into(),
-            "fast".into(),
-            "--env-size".into(),
-            "32x16".into(),
-            "--objective".into(),
-            s(objective),
-            "--out".into(),
-            s(out),
-        ];
-        alp(&args.iter().map(String::as_str).collect::<Vec<_>>())
+        let objective = objective.to_str().expect("utf-8");
+        let options = ["--quality", "fast", "--env-size", "32x16", "--objective", objective];
+        estimate(&scene, out, &options)
     };
     // Mask terms only: the pose phases then never render.
     let good = dir.join("masks_only.json");
@@ -257,42 +259,9 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
 fn estimate_memory_stays_flat_from_one_phase_to_the_next() {
     let (dir, env) = workspace("estimate-memory");
     let scene = dir.join("scene");
-    let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
-    let synth_args = [
-        "synth".into(),
-        "--probe".into(),
-        "can".into(),
-        "--env".into(),
-        s(&env),
-        "--out".into(),
-        s(&scene),
-        "--width".into(),
-        "160".into(),
-        "--height".into(),
-        "120".into(),
-        "--spp".into(),
-        "8".into(),
-        "--seed".into(),
-        "7".into(),
-    ];
-    let out = alp(&synth_args.iter().map(String::as_str).collect::<Vec<_>>());
+    let out = synth_sized(&env, &scene, ("160", "120"), &["--seed", "7"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let args = [
-        "estimate".into(),
-        "--image".into(),
-        s(&scene.join("image.exr")),
-        "--mask".into(),
-        s(&scene.join("mask.png")),
-        "--camera".into(),
-        s(&scene.join("camera.json")),
-        "--probe".into(),
-        "can".into(),
-        "--env-size".into(),
-        "64x32".into(),
-        "--out".into(),
-        s(&dir.join("estimate")),
-    ];
-    let out = alp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let out = estimate(&scene, &dir.join("estimate"), &["--env-size", "64x32"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("estimate/report.json")).expect("report"))
