@@ -184,28 +184,33 @@ mod tests {
     use render::integrator::{RenderSettings, render_image};
     use render::procedural::SodaCan;
 
-    #[test]
-    fn the_start_lands_near_the_true_position_of_an_upright_can() {
-        let probe = SodaCan::default().build();
-        let camera = Camera::new(
+    /// A 160x120 camera 0.45 m in front of the origin at `height`, looking
+    /// at the point `target_height` above the origin.
+    fn camera(height: f32, target_height: f32) -> Camera {
+        Camera::new(
             160,
             120,
             40.0,
-            Vec3::new(0.0, 0.1, 0.45),
-            Vec3::new(0.0, 0.06, 0.0),
+            Vec3::new(0.0, height, 0.45),
+            Vec3::new(0.0, target_height, 0.0),
             Vec3::Y,
         )
-        .expect("camera");
-        let truth = Pose::new(Quat::from_rotation_y(0.4), 1.0, Vec3::new(0.02, 0.0, -0.03));
+        .expect("camera")
+    }
+
+    /// The can's mask from `camera` at `truth`.
+    fn can_mask(probe: &render::probe::ProbeAsset, camera: &Camera, truth: &Pose) -> Mask {
         let env = EnvMap::constant(8, [1.0; 3]);
-        let (_, mask) = render_image(
-            &probe,
-            &truth,
-            &camera,
-            &env,
-            &GgxMetal,
-            &RenderSettings { spp: 1, seed: 0 },
-        );
+        let settings = RenderSettings { spp: 1, seed: 0 };
+        render_image(probe, truth, camera, &env, &GgxMetal, &settings).1
+    }
+
+    #[test]
+    fn the_start_lands_near_the_true_position_of_an_upright_can() {
+        let probe = SodaCan::default().build();
+        let camera = camera(0.1, 0.06);
+        let truth = Pose::new(Quat::from_rotation_y(0.4), 1.0, Vec3::new(0.02, 0.0, -0.03));
+        let mask = can_mask(&probe, &camera, &truth);
         let shape = MaskShape::new(&mask).expect("a mask");
         let start = initial_pose(&probe.mesh, &camera, &shape, camera.up);
         let centre = Vec3::new(0.0, 0.061, 0.0);
@@ -220,32 +225,10 @@ mod tests {
         );
     }
 
-    /// The can's mask from `camera` at `truth`.
-    fn can_mask(probe: &render::probe::ProbeAsset, camera: &Camera, truth: &Pose) -> Mask {
-        let env = EnvMap::constant(8, [1.0; 3]);
-        render_image(
-            probe,
-            truth,
-            camera,
-            &env,
-            &GgxMetal,
-            &RenderSettings { spp: 1, seed: 0 },
-        )
-        .1
-    }
-
     #[test]
     fn one_axis_hypothesis_is_near_the_truth_whether_the_can_stands_lies_or_leans() {
         let probe = SodaCan::default().build();
-        let camera = Camera::new(
-            160,
-            120,
-            40.0,
-            Vec3::new(0.0, 0.25, 0.45),
-            Vec3::new(0.0, 0.03, 0.0),
-            Vec3::Y,
-        )
-        .expect("camera");
+        let camera = camera(0.25, 0.03);
         // Upright; lying on the table at three headings; leaning towards the
         // image's side; lying towards the camera (seen nearly end-on).
         let lying = |heading: f32| Quat::from_rotation_y(heading) * Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);

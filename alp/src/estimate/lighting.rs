@@ -182,7 +182,7 @@ pub fn pyramid(size: (usize, usize), coarsest: usize) -> Vec<(usize, usize)> {
 
 /// Bilinear resampling of a texel-major RGB map from size `from` to `to`
 /// (FORMATS.md lookups: texel centres at +0.5, wrap in u, clamp in v).
-pub fn upsample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec<f64> {
+pub fn resample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec<f64> {
     if from == to {
         return texels.to_vec();
     }

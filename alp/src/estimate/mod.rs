@@ -627,7 +627,7 @@ fn fit_lighting(
             let mut transport = None;
             let finest = *levels.last().expect("at least one level");
             for level in levels {
-                let x0 = lighting::upsample(&x, previous, level);
+                let x0 = lighting::resample(&x, previous, level);
                 let t = at(level);
                 // A coarser level only starts the next one.
                 let level_settings = LightingSolve {
@@ -935,18 +935,6 @@ fn env_from_texels(texels: &[f64], width: usize, height: usize) -> Result<EnvMap
         .chunks_exact(3)
         .map(|t| [t[0] as f32, t[1] as f32, t[2] as f32])
         .collect();
-    EnvMap::new(width, height, radiance)
-}
-
-/// Bilinear resampling of a map to another 2:1 size (FORMATS.md lookups).
-fn resample(env: &EnvMap, width: usize, height: usize) -> Result<EnvMap> {
-    let mut radiance = Vec::with_capacity(width * height);
-    for r in 0..height {
-        for c in 0..width {
-            let uv = glam::Vec2::new((c as f32 + 0.5) / width as f32, (r as f32 + 0.5) / height as f32);
-            radiance.push(env.lookup_uv(uv));
-        }
-    }
     EnvMap::new(width, height, radiance)
 }
 
@@ -1308,10 +1296,9 @@ pub fn estimate_with_progress(
     )?;
     let final_psnr = psnr(&fit.rendered, &fit.target, &fit.weight);
     phases.push(lighting_report("lighting_final", &fit, t1, final_psnr));
-    let working_env = env_from_texels(&fit.env, work.0, work.1)?;
-    let env = resample(&working_env, out_w, out_h)?;
-    let confidence = fit.transport.confidence().iter().map(|&c| [c; 3]).collect();
-    let confidence = resample(&EnvMap::new(work.0, work.1, confidence)?, out_w, out_h)?;
+    let env = env_from_texels(&lighting::resample(&fit.env, work, (out_w, out_h)), out_w, out_h)?;
+    let confidence: Vec<f64> = fit.transport.confidence().iter().flat_map(|&c| [c as f64; 3]).collect();
+    let confidence = env_from_texels(&lighting::resample(&confidence, work, (out_w, out_h)), out_w, out_h)?;
     let channels: [Vec<f64>; 3] = std::array::from_fn(|c| fit.rendered.iter().map(|p| p[c]).collect());
     let rerender = fit.hits.to_image([&channels[0], &channels[1], &channels[2]]);
     let report = Report {
