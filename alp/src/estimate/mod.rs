@@ -308,6 +308,17 @@ fn ranks_above(a: &StartReport, b: &StartReport) -> bool {
     }
 }
 
+/// Relative difference below which two starts' ranking errors are the same
+/// render's (a probe symmetric about its axis, turned): rounding, not shading.
+const SAME_RENDER: f64 = 1e-6;
+
+/// Whether two starts rendered alike: the same colour and relative errors
+/// to [`SAME_RENDER`].
+fn renders_alike(a: &StartReport, b: &StartReport) -> bool {
+    let close = |x: f64, y: f64| (x - y).abs() <= SAME_RENDER * x.abs().max(y.abs());
+    close(a.rgb_angle_deg, b.rgb_angle_deg) && close(a.relative_error, b.relative_error)
+}
+
 /// What `report.json` holds.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -1143,8 +1154,15 @@ fn search_pose(
     };
     // The best start's yaw refined by halving steps about it (the starts are
     // a coarse grid; the image loss alone pulls a turn in only slowly).
-    let mut step = 180.0 / settings.starts_deg.len() as f32;
+    // A probe symmetric about its axis (a cap of one colour) renders the
+    // same at every turn: nothing to refine.
     let mut chosen = best_of(&starts);
+    let same_axis: Vec<&StartReport> = starts.iter().filter(|s| s.axis == starts[chosen].axis).collect();
+    let symmetric = same_axis.len() > 1 && same_axis.iter().all(|s| renders_alike(s, same_axis[0]));
+    let mut step = match symmetric {
+        true => 0.0,
+        false => 180.0 / settings.starts_deg.len() as f32,
+    };
     while step >= YAW_REFINE_DEG {
         let (a, yaw) = (starts[chosen].axis, starts[chosen].yaw_deg);
         phases.expect_more(2);
