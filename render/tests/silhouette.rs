@@ -110,13 +110,13 @@ fn band_coverage_gradient_matches_finite_differences() {
     let report = check_pose_gradient(&sphere(), &sphere_pose(), SMOOTH, |soft| soft.band_coverage);
     eprintln!("band coverage: {report}");
     assert!(report.worst_rel_error < 1e-6, "{report}");
-    // The default sigma (0.5 px^2) is sharper than the finite-difference step (about 1e-3 px of
-    // motion) resolves to 1e-6: its O(h^2) truncation error is a few 1e-6.
+    // The default sigma (0.1 px^2) is sharper than the finite-difference step (about 1e-3 px of
+    // motion) resolves to 1e-6: its O(h^2) truncation error is a few 1e-5 (a few 1e-6 at 0.5).
     let report = check_pose_gradient(&sphere(), &sphere_pose(), SilhouetteSettings::default(), |soft| {
         soft.band_coverage
     });
     eprintln!("band coverage, default settings: {report}");
-    assert!(report.worst_rel_error < 2e-5, "{report}");
+    assert!(report.worst_rel_error < 1e-4, "{report}");
 }
 
 #[test]
@@ -375,4 +375,70 @@ fn bad_references_and_poses_are_errors() {
     )
     .unwrap_err();
     assert_eq!(bad_sigma.field_name(), Some("sigma_px2"), "{bad_sigma}");
+}
+
+#[test]
+fn mask_losses_are_least_at_the_true_scale() {
+    // The limb's lift of the soft coverage and a Chamfer charge measured to
+    // the reference's pixel centres both favoured a smaller probe (the mask
+    // L1 of this can was least at 0.982 of its scale with sigma 0.5 px^2, the
+    // Chamfer at 0.992; now 0.994 and 0.998).
+    let camera = Camera::new(
+        128,
+        96,
+        30.0,
+        Vec3::new(0.0, 0.061, 0.3),
+        Vec3::new(0.0, 0.061, 0.0),
+        Vec3::Y,
+    )
+    .unwrap();
+    let (mesh, truth) = (can(), base_pose());
+    let plan_at = |pose: &Pose| {
+        SilhouettePlan::new(
+            &mesh,
+            &mesh.posed(pose).positions,
+            &camera,
+            SilhouetteSettings::default(),
+        )
+        .unwrap()
+    };
+    let reference = ReferenceMask::new(&plan_at(&truth).hard_mask()).unwrap();
+    let (lo, hi) = mesh.bounds();
+    let centre = truth.transform_point(0.5 * (lo + hi));
+    let scales: Vec<f32> = (-15..=15).map(|k| 1.0 + 0.002 * k as f32).collect();
+    let losses: Vec<(f64, f64)> = scales
+        .iter()
+        .map(|&f| {
+            // Scaled about the probe's centre, which stays in place.
+            let pose = Pose::new(
+                truth.rotation,
+                truth.scale * f,
+                centre + f * (truth.translation - centre),
+            );
+            let tape = Tape::<f64>::new();
+            let posed = PosedMesh::new(
+                &MeshVars::new(&tape, &mesh),
+                &PoseVars::new(&tape, &pack_pose(&pose), false),
+            );
+            let plan = plan_at(&pose);
+            let soft = plan.soft_mask(&posed);
+            let value = |v: autodiff::Var<f64>| tape.to_vec(v)[0];
+            (
+                value(soft.mask_l1(&reference).unwrap()),
+                value(soft.chamfer(&reference).unwrap()),
+            )
+        })
+        .collect();
+    let argmin = |loss: &dyn Fn(&(f64, f64)) -> f64| {
+        let k = (0..losses.len())
+            .min_by(|&a, &b| loss(&losses[a]).total_cmp(&loss(&losses[b])))
+            .unwrap();
+        scales[k]
+    };
+    let (l1, chamfer) = (argmin(&|l| l.0), argmin(&|l| l.1));
+    assert!((l1 - 1.0).abs() <= 0.006, "mask L1 least at {l1} x the true scale");
+    assert!(
+        (chamfer - 1.0).abs() <= 0.006,
+        "Chamfer least at {chamfer} x the true scale"
+    );
 }
