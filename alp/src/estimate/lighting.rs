@@ -72,31 +72,71 @@ impl Transport {
             width == 2 * height && height > 0,
             "Transport: env maps are 2:1, got {width}x{height}"
         );
-        // (pixel, texel, weight) of every tap, merged per (pixel, texel).
-        let mut taps: Vec<(u32, u32, [f32; 3])> = Vec::with_capacity(4 * segment.len());
-        for ((&pixel, &d), &t) in segment.iter().zip(wi).zip(throughput) {
-            let (texels, weights) = bilinear_taps(d, width, height);
-            for (&texel, &w) in texels.iter().zip(&weights) {
-                if w > 0.0 {
-                    taps.push((pixel, texel, t.map(|c| c * w)));
+        // Samples grouped by pixel (a counting sort: passes append their
+        // samples pixel by pixel), then each pixel's taps merged per texel
+        // in parallel; columns by a counting sort of the merged entries.
+        let sample_start = key_starts(segment.iter().map(|&p| p as usize), pixels);
+        let mut by_pixel = vec![0u32; segment.len()];
+        let mut next = sample_start.clone();
+        for (k, &p) in segment.iter().enumerate() {
+            by_pixel[next[p as usize]] = k as u32;
+            next[p as usize] += 1;
+        }
+        let merged_rows: Vec<Vec<Entry>> = (0..pixels)
+            .into_par_iter()
+            .map(|p| {
+                let samples = &by_pixel[sample_start[p]..sample_start[p + 1]];
+                let mut taps: Vec<Entry> = Vec::with_capacity(4 * samples.len());
+                for &k in samples {
+                    let (texels, weights) = bilinear_taps(wi[k as usize], width, height);
+                    for (&index, &w) in texels.iter().zip(&weights) {
+                        if w > 0.0 {
+                            taps.push(Entry {
+                                index,
+                                weight: throughput[k as usize].map(|c| c * w),
+                            });
+                        }
+                    }
                 }
+                // Stable: each texel's weights add up in sample order.
+                taps.sort_by_key(|e| e.index);
+                let mut row: Vec<Entry> = Vec::with_capacity(taps.len());
+                for e in taps {
+                    match row.last_mut() {
+                        Some(last) if last.index == e.index => (0..3).for_each(|c| last.weight[c] += e.weight[c]),
+                        _ => row.push(e),
+                    }
+                }
+                row
+            })
+            .collect();
+        let row_start = key_starts(
+            merged_rows
+                .iter()
+                .enumerate()
+                .flat_map(|(p, row)| std::iter::repeat_n(p, row.len())),
+            pixels,
+        );
+        let rows: Vec<Entry> = merged_rows.into_iter().flatten().collect();
+        let column_start = key_starts(rows.iter().map(|e| e.index as usize), width * height);
+        let mut columns = vec![
+            Entry {
+                index: 0,
+                weight: [0.0; 3]
+            };
+            rows.len()
+        ];
+        let mut next = column_start.clone();
+        for p in 0..pixels {
+            for e in &rows[row_start[p]..row_start[p + 1]] {
+                let slot = &mut next[e.index as usize];
+                columns[*slot] = Entry {
+                    index: p as u32,
+                    weight: e.weight,
+                };
+                *slot += 1;
             }
         }
-        taps.sort_unstable_by_key(|&(pixel, texel, _)| (pixel, texel));
-        let mut merged: Vec<(u32, u32, [f32; 3])> = Vec::with_capacity(taps.len());
-        for (pixel, texel, w) in taps {
-            match merged.last_mut() {
-                Some(last) if last.0 == pixel && last.1 == texel => (0..3).for_each(|c| last.2[c] += w[c]),
-                _ => merged.push((pixel, texel, w)),
-            }
-        }
-        let (row_start, rows) = compressed(&merged, pixels, |&(pixel, texel, weight)| {
-            (pixel, Entry { index: texel, weight })
-        });
-        merged.sort_by_key(|&(pixel, texel, _)| (texel, pixel));
-        let (column_start, columns) = compressed(&merged, width * height, |&(pixel, texel, weight)| {
-            (texel, Entry { index: pixel, weight })
-        });
         Transport {
             width,
             height,
@@ -171,20 +211,15 @@ impl Transport {
     }
 }
 
-/// Compressed rows of `items` sorted by the key `entry` returns first:
-/// `start[k]..start[k + 1]` holds row k's entries, for `count` rows.
-fn compressed<T>(items: &[T], count: usize, entry: impl Fn(&T) -> (u32, Entry)) -> (Vec<usize>, Vec<Entry>) {
+/// `start[k]..start[k + 1]` is where the items of key k go when `keys`
+/// (one per item, each below `count`) are sorted: a counting sort's offsets.
+fn key_starts(keys: impl Iterator<Item = usize>, count: usize) -> Vec<usize> {
     let mut start = vec![0usize; count + 1];
-    let mut entries = Vec::with_capacity(items.len());
-    for item in items {
-        let (row, e) = entry(item);
-        start[row as usize + 1] += 1;
-        entries.push(e);
-    }
+    keys.for_each(|k| start[k + 1] += 1);
     for k in 0..count {
         start[k + 1] += start[k];
     }
-    (start, entries)
+    start
 }
 
 /// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
