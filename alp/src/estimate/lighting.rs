@@ -110,13 +110,12 @@ impl Transport {
                 row
             })
             .collect();
-        let row_start = key_starts(
-            merged_rows
-                .iter()
-                .enumerate()
-                .flat_map(|(p, row)| std::iter::repeat_n(p, row.len())),
-            pixels,
-        );
+        let row_start: Vec<usize> = std::iter::once(0)
+            .chain(merged_rows.iter().scan(0, |end, row| {
+                *end += row.len();
+                Some(*end)
+            }))
+            .collect();
         let rows: Vec<Entry> = merged_rows.into_iter().flatten().collect();
         let column_start = key_starts(rows.iter().map(|e| e.index as usize), width * height);
         let mut columns = vec![

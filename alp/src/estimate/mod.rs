@@ -1180,25 +1180,26 @@ fn search_pose(
     }
     let mut pose = candidates[chosen];
     let depth = (pose.translation - photo.camera.origin).length();
-    // The working-resolution map only for the start kept.
-    let t1 = Instant::now();
-    let mut fit = fit_lighting(
-        probe,
-        photo,
-        &pose,
-        work,
-        &quick,
-        clipped,
-        search_smoothness,
-        LightingPurpose::Search,
-        None,
-    )?;
-    phases.push(lighting_report(
-        "lighting",
-        &fit,
-        t1,
-        psnr(&fit.rendered, &fit.target, &fit.weight),
-    ));
+    // The working-resolution map, from `start` (or from scratch), reported.
+    let search_lighting = |pose: &Pose, start: Option<&[f64]>, phases: &mut PhaseLog| -> Result<LightingFit> {
+        let t1 = Instant::now();
+        let fit = fit_lighting(
+            probe,
+            photo,
+            pose,
+            work,
+            &quick,
+            clipped,
+            search_smoothness,
+            LightingPurpose::Search,
+            start,
+        )?;
+        let score = psnr(&fit.rendered, &fit.target, &fit.weight);
+        phases.push(lighting_report("lighting", &fit, t1, score));
+        Ok(fit)
+    };
+    // Only for the start kept.
+    let mut fit = search_lighting(&pose, None, phases)?;
     for round in 0..settings.rounds {
         let env = env_from_texels(&fit.env, work.0, work.1)?;
         let (new_pose, report) = fit_pose_to_image(&ctx, pose, &env, settings, depth, round)?;
@@ -1208,24 +1209,7 @@ fn search_pose(
             // The output's own solve follows.
             break;
         }
-        let t1 = Instant::now();
-        fit = fit_lighting(
-            probe,
-            photo,
-            &pose,
-            work,
-            &quick,
-            clipped,
-            search_smoothness,
-            LightingPurpose::Search,
-            Some(&fit.env),
-        )?;
-        phases.push(lighting_report(
-            "lighting",
-            &fit,
-            t1,
-            psnr(&fit.rendered, &fit.target, &fit.weight),
-        ));
+        fit = search_lighting(&pose, Some(&fit.env), phases)?;
     }
     Ok(PoseSearch {
         pose,
