@@ -84,9 +84,10 @@ impl Transport {
         }
         let merged_rows: Vec<Vec<Entry>> = (0..pixels)
             .into_par_iter()
-            .map(|p| {
+            .map_init(Vec::new, |taps: &mut Vec<Entry>, p| {
+                // One tap buffer per worker, reused from pixel to pixel.
+                taps.clear();
                 let samples = &by_pixel[sample_start[p]..sample_start[p + 1]];
-                let mut taps: Vec<Entry> = Vec::with_capacity(4 * samples.len());
                 for &k in samples {
                     let (texels, weights) = bilinear_taps(wi[k as usize], width, height);
                     for (&index, &w) in texels.iter().zip(&weights) {
@@ -101,7 +102,7 @@ impl Transport {
                 // Stable: each texel's weights add up in sample order.
                 taps.sort_by_key(|e| e.index);
                 let mut row: Vec<Entry> = Vec::with_capacity(taps.len());
-                for e in taps {
+                for &e in taps.iter() {
                     match row.last_mut() {
                         Some(last) if last.index == e.index => (0..3).for_each(|c| last.weight[c] += e.weight[c]),
                         _ => row.push(e),

@@ -20,7 +20,7 @@
 //! Known SoftRas behaviour, inherited: two front triangles sharing an edge both contribute near
 //! it, so a band pixel centred on an interior edge has coverage 0.75, and the thin foreshortened
 //! triangles along the limb of a curved object lift the coverage on the silhouette above 0.5
-//! (by 0.1-0.25 with the default sigma). A smaller `sigma_px2` narrows both effects.
+//! (by 0.1-0.25 with sigma 0.5 px^2). A smaller `sigma_px2` narrows both effects.
 //!
 //! ```no_run
 //! use autodiff::Tape;
@@ -55,7 +55,7 @@ use crate::error::{RenderError, Result};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SilhouetteSettings {
     /// SoftRas sharpness sigma, in squared pixels: a pixel centre `d` pixels outside a triangle
-    /// gets `sigmoid(-d^2 / sigma)` from it (0.5 px^2: 0.12 at 1 px, 3e-4 at 2 px).
+    /// gets `sigmoid(-d^2 / sigma)` from it (the default 0.1 px^2: 0.08 at 0.5 px, 5e-5 at 1 px).
     pub sigma_px2: f32,
     /// Half-width of the band around the hard silhouette where coverage is soft, in pixels
     /// (centre-to-centre distance to the nearest boundary pixel).
