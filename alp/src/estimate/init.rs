@@ -165,6 +165,32 @@ pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3)
     Pose::new(rotation, 1.0, translation)
 }
 
+/// The poses whose outline is about that of `pose`, with the probe's
+/// centre in place: its axis mirrored through the plane across the view
+/// ray (an axis leaning towards the camera and one leaning as far away
+/// show the same outline under orthographic projection), the probe turned
+/// end for end (half a turn about its mesh X axis: the same outline where
+/// its two ends have like outlines), and both. A silhouette fit stops on
+/// whichever of them is nearest its start.
+pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> [Pose; 3] {
+    let (lo, hi) = mesh.bounds();
+    let centre = pose.transform_point(0.5 * (lo + hi));
+    let about_centre = |rotation: Quat| {
+        let rotation = rotation.normalize();
+        Pose::new(rotation, pose.scale, centre - rotation * (pose.scale * 0.5 * (lo + hi)))
+    };
+    let view = (centre - camera.origin).normalize();
+    let axis = (pose.rotation * Vec3::Y).normalize();
+    let mirrored = axis - 2.0 * axis.dot(view) * view;
+    let mirror = Quat::from_rotation_arc(axis, mirrored) * pose.rotation;
+    let end_for_end = |rotation: Quat| rotation * Quat::from_rotation_x(std::f32::consts::PI);
+    [
+        about_centre(mirror),
+        about_centre(end_for_end(pose.rotation)),
+        about_centre(end_for_end(mirror)),
+    ]
+}
+
 /// `pose` turned by `yaw_deg` about the probe's own axis through the centre
 /// of its bounding box (which stays in place).
 pub fn turned(pose: &Pose, mesh: &Mesh, yaw_deg: f32) -> Pose {
@@ -259,6 +285,30 @@ mod tests {
                 best < 30.0,
                 "{name}: nearest hypothesis {best} deg from the axis ({axes:?})"
             );
+        }
+    }
+
+    #[test]
+    fn the_outline_twins_lean_as_far_the_other_way_or_turn_end_for_end_and_show_the_same_outline() {
+        let probe = SodaCan::default().build();
+        let camera = camera(0.0, 0.0);
+        let (lo, hi) = probe.mesh.bounds();
+        let centre = 0.5 * (lo + hi);
+        // Leaning 20 degrees towards the camera (+z), centred on the view axis.
+        let lean = |deg: f32| Quat::from_rotation_x(deg.to_radians());
+        let pose = Pose::new(lean(20.0), 1.0, -(lean(20.0) * centre));
+        let twins = outline_twins(&pose, &probe.mesh, &camera);
+        let wants = [lean(-20.0) * Vec3::Y, -(lean(20.0) * Vec3::Y), -(lean(-20.0) * Vec3::Y)];
+        let outline = |pose: &Pose| can_mask(&probe, &camera, pose).inside;
+        let seen = outline(&pose);
+        let area = seen.iter().filter(|&&x| x).count();
+        for (twin, want) in twins.iter().zip(wants) {
+            assert!(twin.transform_point(centre).length() < 1e-5, "the centre stays");
+            let axis = twin.rotation * Vec3::Y;
+            assert!((axis - want).length() < 1e-4, "axis {axis} vs {want}");
+            let differ = outline(twin).iter().zip(&seen).filter(|(x, y)| x != y).count();
+            // Perspective and the can's unlike ends: a fringe.
+            assert!(differ * 8 < area, "{differ} of {area} pixels differ");
         }
     }
 
