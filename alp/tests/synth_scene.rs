@@ -213,7 +213,17 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
     assert!(synth(&env, &scene, &["--seed", "5"]).status.success());
     let estimate = |objective: &Path, out: &Path| {
         let objective = objective.to_str().expect("utf-8");
-        let options = ["--quality", "fast", "--env-size", "32x16", "--objective", objective];
+        // One joint round: a pose phase that sees the objective's terms.
+        let options = [
+            "--quality",
+            "fast",
+            "--env-size",
+            "32x16",
+            "--rounds",
+            "1",
+            "--objective",
+            objective,
+        ];
         estimate(&scene, out, &options)
     };
     // Mask terms only: the pose phases then never render.
@@ -261,7 +271,9 @@ fn estimate_memory_stays_flat_from_one_phase_to_the_next() {
     let scene = dir.join("scene");
     let out = synth_sized(&env, &scene, ("160", "120"), &["--seed", "7"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let out = estimate(&scene, &dir.join("estimate"), &["--env-size", "64x32"]);
+    // Two joint rounds: pose and lighting phases to compare.
+    let options = ["--env-size", "64x32", "--rounds", "2"];
+    let out = estimate(&scene, &dir.join("estimate"), &options);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("estimate/report.json")).expect("report"))

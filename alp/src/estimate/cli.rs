@@ -48,6 +48,11 @@ pub struct EstimateArgs {
     /// Output env map size, WIDTHxHEIGHT (2:1).
     #[arg(long, default_value = "256x128")]
     pub env_size: String,
+    /// Joint rounds after the search: the pose by the objective's image and
+    /// mask terms under a fixed map, then the map at the new pose (default:
+    /// the quality's: 1, 2, 3 for fast, default, best).
+    #[arg(long)]
+    pub rounds: Option<usize>,
 }
 
 fn parse_quality(q: &str) -> Result<Quality> {
@@ -83,6 +88,9 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     let mut settings = Settings::new(parse_quality(&args.quality)?);
     settings.seed = args.seed;
     settings.env_size = parse_size(&args.env_size)?;
+    if let Some(rounds) = args.rounds {
+        settings.rounds = rounds;
+    }
     if args.threads == Some(0) {
         return Err(RenderError::value("--threads", "needs at least one thread"));
     }
