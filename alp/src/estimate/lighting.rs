@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use render::envmap::direction_to_uv;
 
 /// One entry of the transport: a texel and the RGB weight with which it
-/// reaches a pixel (or, in the column copy, a pixel it reaches).
+/// reaches a pixel.
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     index: u32,
@@ -19,11 +19,13 @@ struct Entry {
 }
 
 /// The linear map from an env map (texel-major RGB at `width x height`) to
-/// the probe's pixels, as a sparse matrix: per pixel the texels its light
-/// samples read (bilinear taps of every sample merged, so that more samples
-/// per pixel cost memory only where lobes are wide), and per texel the
-/// pixels it reaches (the transposed product gathers instead of scattering:
-/// parallel and independent of the thread count).
+/// the probe's pixels, as a sparse matrix stored by pixel: the texels each
+/// pixel's light samples read (bilinear taps of every sample merged, so
+/// that more samples per pixel cost memory only where lobes are wide).
+/// Products with its transpose sum per chunk of [`PIXEL_CHUNK`] pixels
+/// into a dense map (the map is small next to the transport: no
+/// transposed copy), the chunks in order: parallel, and the same sums
+/// whatever the thread count.
 #[derive(Clone, Debug)]
 pub struct Transport {
     /// Env map columns.
@@ -34,9 +36,10 @@ pub struct Transport {
     pub pixels: usize,
     row_start: Vec<usize>,
     rows: Vec<Entry>,
-    column_start: Vec<usize>,
-    columns: Vec<Entry>,
 }
+
+/// Pixels per chunk of the transport's construction and transposed sums.
+const PIXEL_CHUNK: usize = 2048;
 
 /// The four texels and weights of a bilinear lookup at direction `d`
 /// (FORMATS.md: texel centres at +0.5, wrap in u, clamp in v).
@@ -73,8 +76,9 @@ impl Transport {
             "Transport: env maps are 2:1, got {width}x{height}"
         );
         // Samples grouped by pixel (a counting sort: passes append their
-        // samples pixel by pixel), then each pixel's taps merged per texel
-        // in parallel; columns by a counting sort of the merged entries.
+        // samples pixel by pixel), then each pixel's taps merged per texel,
+        // chunks of pixels in parallel, each into one buffer (per-pixel
+        // buffers left the allocator holding hundreds of MB).
         let sample_start = key_starts(segment.iter().map(|&p| p as usize), pixels);
         let mut by_pixel = vec![0u32; segment.len()];
         let mut next = sample_start.clone();
@@ -82,60 +86,48 @@ impl Transport {
             by_pixel[next[p as usize]] = k as u32;
             next[p as usize] += 1;
         }
-        let merged_rows: Vec<Vec<Entry>> = (0..pixels)
+        let chunks: Vec<(Vec<usize>, Vec<Entry>)> = (0..pixels.div_ceil(PIXEL_CHUNK))
             .into_par_iter()
-            .map_init(Vec::new, |taps: &mut Vec<Entry>, p| {
-                // One tap buffer per worker, reused from pixel to pixel.
-                taps.clear();
-                let samples = &by_pixel[sample_start[p]..sample_start[p + 1]];
-                for &k in samples {
-                    let (texels, weights) = bilinear_taps(wi[k as usize], width, height);
-                    for (&index, &w) in texels.iter().zip(&weights) {
-                        if w > 0.0 {
-                            taps.push(Entry {
-                                index,
-                                weight: throughput[k as usize].map(|c| c * w),
-                            });
+            .map(|chunk| {
+                let pixel_range = chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(pixels);
+                let mut lengths = Vec::with_capacity(PIXEL_CHUNK);
+                let (mut entries, mut taps): (Vec<Entry>, Vec<Entry>) = (Vec::new(), Vec::new());
+                for p in pixel_range {
+                    taps.clear();
+                    for &k in &by_pixel[sample_start[p]..sample_start[p + 1]] {
+                        let (texels, weights) = bilinear_taps(wi[k as usize], width, height);
+                        for (&index, &w) in texels.iter().zip(&weights) {
+                            if w > 0.0 {
+                                taps.push(Entry {
+                                    index,
+                                    weight: throughput[k as usize].map(|c| c * w),
+                                });
+                            }
                         }
                     }
-                }
-                // Stable: each texel's weights add up in sample order.
-                taps.sort_by_key(|e| e.index);
-                let mut row: Vec<Entry> = Vec::with_capacity(taps.len());
-                for &e in taps.iter() {
-                    match row.last_mut() {
-                        Some(last) if last.index == e.index => (0..3).for_each(|c| last.weight[c] += e.weight[c]),
-                        _ => row.push(e),
+                    // Stable: each texel's weights add up in sample order.
+                    taps.sort_by_key(|e| e.index);
+                    let row_begin = entries.len();
+                    for &e in &taps {
+                        let this_row = &mut entries[row_begin..];
+                        match this_row.last_mut() {
+                            Some(last) if last.index == e.index => (0..3).for_each(|c| last.weight[c] += e.weight[c]),
+                            _ => entries.push(e),
+                        }
                     }
+                    lengths.push(entries.len() - row_begin);
                 }
-                row
+                (lengths, entries)
             })
             .collect();
-        let row_start: Vec<usize> = std::iter::once(0)
-            .chain(merged_rows.iter().scan(0, |end, row| {
-                *end += row.len();
-                Some(*end)
-            }))
-            .collect();
-        let rows: Vec<Entry> = merged_rows.into_iter().flatten().collect();
-        let column_start = key_starts(rows.iter().map(|e| e.index as usize), width * height);
-        let mut columns = vec![
-            Entry {
-                index: 0,
-                weight: [0.0; 3]
-            };
-            rows.len()
-        ];
-        let mut next = column_start.clone();
-        for p in 0..pixels {
-            for e in &rows[row_start[p]..row_start[p + 1]] {
-                let slot = &mut next[e.index as usize];
-                columns[*slot] = Entry {
-                    index: p as u32,
-                    weight: e.weight,
-                };
-                *slot += 1;
+        let mut row_start = Vec::with_capacity(pixels + 1);
+        row_start.push(0);
+        let mut rows = Vec::with_capacity(chunks.iter().map(|(_, e)| e.len()).sum());
+        for (lengths, entries) in chunks {
+            for length in lengths {
+                row_start.push(row_start[row_start.len() - 1] + length);
             }
+            rows.extend_from_slice(&entries);
         }
         Transport {
             width,
@@ -143,8 +135,6 @@ impl Transport {
             pixels,
             row_start,
             rows,
-            column_start,
-            columns,
         }
     }
 
@@ -153,11 +143,16 @@ impl Transport {
         self.width * self.height * 3
     }
 
+    /// The entries of pixel `p`'s row.
+    fn row(&self, p: usize) -> &[Entry] {
+        &self.rows[self.row_start[p]..self.row_start[p + 1]]
+    }
+
     /// The pixels' radiance under `env` (texel-major RGB).
     pub fn apply(&self, env: &[f64], out: &mut [[f64; 3]]) {
         out.par_iter_mut().enumerate().for_each(|(p, px)| {
             *px = [0.0; 3];
-            for e in &self.rows[self.row_start[p]..self.row_start[p + 1]] {
+            for e in self.row(p) {
                 for c in 0..3 {
                     px[c] += e.weight[c] as f64 * env[e.index as usize * 3 + c];
                 }
@@ -165,46 +160,50 @@ impl Transport {
         });
     }
 
+    /// Per texel and channel (texel-major RGB), the sum over the entries
+    /// of every pixel of `term(pixel, entry)`: the transposed products.
+    fn texel_sums(&self, term: impl Fn(usize, &Entry) -> [f64; 3] + Sync) -> Vec<f64> {
+        let partial: Vec<Vec<f64>> = (0..self.pixels.div_ceil(PIXEL_CHUNK))
+            .into_par_iter()
+            .map(|chunk| {
+                let mut sums = vec![0.0; self.unknowns()];
+                for p in chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(self.pixels) {
+                    for e in self.row(p) {
+                        let t = term(p, e);
+                        (0..3).for_each(|c| sums[e.index as usize * 3 + c] += t[c]);
+                    }
+                }
+                sums
+            })
+            .collect();
+        let mut total = vec![0.0; self.unknowns()];
+        for sums in partial {
+            total.iter_mut().zip(sums).for_each(|(t, s)| *t += s);
+        }
+        total
+    }
+
     /// `grad += A^T residual` for per-pixel RGB residuals.
     pub fn apply_transpose(&self, residual: &[[f64; 3]], grad: &mut [f64]) {
-        grad.par_chunks_exact_mut(3).enumerate().for_each(|(t, g)| {
-            for e in &self.columns[self.column_start[t]..self.column_start[t + 1]] {
-                let r = residual[e.index as usize];
-                for c in 0..3 {
-                    g[c] += e.weight[c] as f64 * r[c];
-                }
-            }
-        });
+        let sums = self.texel_sums(|p, e| std::array::from_fn(|c| e.weight[c] as f64 * residual[p][c]));
+        grad.iter_mut().zip(sums).for_each(|(g, s)| *g += s);
     }
 
     /// Per texel and channel, `sum_p weight_p a_pt^2`: the data term's
     /// curvature along that unknown (texel-major RGB).
     pub fn weighted_column_norms(&self, weight: &[f64]) -> Vec<f64> {
-        (0..self.width * self.height)
-            .flat_map(|t| {
-                let column = &self.columns[self.column_start[t]..self.column_start[t + 1]];
-                let norm = |c: usize| {
-                    column
-                        .iter()
-                        .map(|e| weight[e.index as usize] * (e.weight[c] as f64).powi(2))
-                        .sum()
-                };
-                [norm(0), norm(1), norm(2)]
-            })
-            .collect()
+        self.texel_sums(|p, e| e.weight.map(|w| weight[p] * (w as f64).powi(2)))
     }
 
     /// How strongly each texel reaches the pixels (the summed luminance of
     /// its weights), normalised to a maximum of 1: the paper's sampling
     /// frequency, our confidence map.
     pub fn confidence(&self) -> Vec<f32> {
-        let freq: Vec<f64> = (0..self.width * self.height)
-            .map(|t| {
-                self.columns[self.column_start[t]..self.column_start[t + 1]]
-                    .iter()
-                    .map(|e| (0.2126 * e.weight[0] + 0.7152 * e.weight[1] + 0.0722 * e.weight[2]) as f64)
-                    .sum()
-            })
+        let luminance = |e: &Entry| (0.2126 * e.weight[0] + 0.7152 * e.weight[1] + 0.0722 * e.weight[2]) as f64;
+        let freq: Vec<f64> = self
+            .texel_sums(|_, e| [luminance(e), 0.0, 0.0])
+            .into_iter()
+            .step_by(3)
             .collect();
         let max = freq.iter().cloned().fold(0.0, f64::max).max(1e-30);
         freq.iter().map(|&f| (f / max) as f32).collect()
@@ -457,6 +456,34 @@ mod tests {
             (lhs - rhs).abs() < 1e-9 * lhs.abs().max(1.0),
             "<Ax, r> {lhs} vs <x, A^T r> {rhs}"
         );
+    }
+
+    #[test]
+    fn transposed_sums_do_not_depend_on_the_thread_count() {
+        let (w, h) = (16, 8);
+        // More pixels than one chunk holds, each reading several texels.
+        let pixels = 2 * PIXEL_CHUNK + 77;
+        let (mut segment, mut wi, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..4 * pixels as u32 {
+            let uv = glam::Vec2::new((k as f32 * 0.1373).fract(), (k as f32 * 0.2917).fract());
+            segment.push(k / 4);
+            wi.push(uv_to_direction(uv));
+            throughput.push([0.1 + (k % 13) as f32 * 0.37, 0.3, 1e-3 * k as f32]);
+        }
+        let transport = Transport::new(&segment, &wi, &throughput, pixels, w, h);
+        let residual: Vec<[f64; 3]> = (0..pixels).map(|p| [(p as f64).sin(), 1e-7 * p as f64, 3.0]).collect();
+        let transposed = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool");
+            pool.install(|| {
+                let mut grad = vec![0.0; transport.unknowns()];
+                transport.apply_transpose(&residual, &mut grad);
+                grad
+            })
+        };
+        assert_eq!(transposed(1), transposed(3));
     }
 
     /// Solves for a map every texel of which one pixel reads directly (one

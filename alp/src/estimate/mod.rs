@@ -659,6 +659,8 @@ fn fit_lighting(
             let finest = *levels.last().expect("at least one level");
             for level in levels {
                 let x0 = lighting::resample(&x, previous, level);
+                // The coarser level's transport goes before this one is built.
+                drop(transport.take());
                 let t = at(level);
                 // A coarser level only starts the next one.
                 let level_settings = LightingSolve {
