@@ -119,9 +119,11 @@ pub struct Settings {
     pub spp_pose: u32,
     /// Samples per pixel of the final lighting solve. Transport noise is
     /// what the converged solve fits last (a bright light's rim takes the
-    /// colour of the pixels whose few samples undercounted it): 64 at
-    /// default quality (suite of 18: 6.78/1.94/2.12 deg at 32, 6.45/1.79/1.82
-    /// at 64, wall median 5.4 -> 7.0 s).
+    /// colour of the pixels whose few samples undercounted it; the studio
+    /// can at its true pose: 12.2/2.0/2.7 deg at 64, 9.7/1.1/1.3 at 128,
+    /// 7.4/0.8/0.6 at 256): 128 at default quality. Suite of 18: 6.78/1.94/
+    /// 2.12 deg at 32, 6.31/1.67/1.70 at 64, 6.16/1.60/1.50 at 128 (wall
+    /// median 7.9 s, max RSS 597 MB), 5.94/1.56/1.45 at 256 (12.6 s).
     pub spp_final: u32,
     /// Working env map height (None: from the probe's roughness).
     pub working_height: Option<usize>,
@@ -153,8 +155,8 @@ impl Settings {
     pub fn new(quality: Quality) -> Self {
         let (starts_deg, axes_kept, silhouette_iters, rounds, pose_iters, spp_pose, spp_final) = match quality {
             Quality::Fast => (yaws(4), 2, 40, 1, 15, 1, 8),
-            Quality::Default => (yaws(8), 3, 50, 2, 20, 2, 64),
-            Quality::Best => (yaws(12), 4, 100, 3, 40, 4, 128),
+            Quality::Default => (yaws(8), 3, 50, 2, 20, 2, 128),
+            Quality::Best => (yaws(12), 4, 100, 3, 40, 4, 256),
         };
         Settings {
             quality,
