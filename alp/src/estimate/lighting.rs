@@ -41,6 +41,11 @@ pub struct Transport {
 /// Pixels per chunk of the transport's construction and transposed sums.
 const PIXEL_CHUNK: usize = 2048;
 
+/// The pixels of chunk `chunk` of `pixels`.
+fn pixel_chunk(chunk: usize, pixels: usize) -> std::ops::Range<usize> {
+    chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(pixels)
+}
+
 /// The four texels and weights of a bilinear lookup at direction `d`
 /// (FORMATS.md: texel centres at +0.5, wrap in u, clamp in v).
 pub fn bilinear_taps(d: Vec3, width: usize, height: usize) -> ([u32; 4], [f32; 4]) {
@@ -89,10 +94,9 @@ impl Transport {
         let chunks: Vec<(Vec<usize>, Vec<Entry>)> = (0..pixels.div_ceil(PIXEL_CHUNK))
             .into_par_iter()
             .map(|chunk| {
-                let pixel_range = chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(pixels);
                 let mut lengths = Vec::with_capacity(PIXEL_CHUNK);
                 let (mut entries, mut taps): (Vec<Entry>, Vec<Entry>) = (Vec::new(), Vec::new());
-                for p in pixel_range {
+                for p in pixel_chunk(chunk, pixels) {
                     taps.clear();
                     for &k in &by_pixel[sample_start[p]..sample_start[p + 1]] {
                         let (texels, weights) = bilinear_taps(wi[k as usize], width, height);
@@ -162,37 +166,41 @@ impl Transport {
 
     /// Per texel and channel (texel-major RGB), the sum over the entries
     /// of every pixel of `term(pixel, entry)`: the transposed products.
-    fn texel_sums(&self, term: impl Fn(usize, &Entry) -> [f64; 3] + Sync) -> Vec<f64> {
-        let partial: Vec<Vec<f64>> = (0..self.pixels.div_ceil(PIXEL_CHUNK))
-            .into_par_iter()
-            .map(|chunk| {
-                let mut sums = vec![0.0; self.unknowns()];
-                for p in chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(self.pixels) {
-                    for e in self.row(p) {
-                        let t = term(p, e);
-                        (0..3).for_each(|c| sums[e.index as usize * 3 + c] += t[c]);
-                    }
+    /// `scratch` holds each chunk's partial sums (reused from call to call:
+    /// a solve's every iteration needs one such sum).
+    fn texel_sums(&self, term: impl Fn(usize, &Entry) -> [f64; 3] + Sync, scratch: &mut Vec<f64>) -> Vec<f64> {
+        let n = self.unknowns();
+        scratch.clear();
+        scratch.resize(self.pixels.div_ceil(PIXEL_CHUNK) * n, 0.0);
+        scratch.par_chunks_mut(n).enumerate().for_each(|(chunk, sums)| {
+            for p in pixel_chunk(chunk, self.pixels) {
+                for e in self.row(p) {
+                    let t = term(p, e);
+                    (0..3).for_each(|c| sums[e.index as usize * 3 + c] += t[c]);
                 }
-                sums
-            })
-            .collect();
-        let mut total = vec![0.0; self.unknowns()];
-        for sums in partial {
+            }
+        });
+        let mut total = vec![0.0; n];
+        for sums in scratch.chunks_exact(n) {
             total.iter_mut().zip(sums).for_each(|(t, s)| *t += s);
         }
         total
     }
 
-    /// `grad += A^T residual` for per-pixel RGB residuals.
-    pub fn apply_transpose(&self, residual: &[[f64; 3]], grad: &mut [f64]) {
-        let sums = self.texel_sums(|p, e| std::array::from_fn(|c| e.weight[c] as f64 * residual[p][c]));
+    /// `grad += A^T residual` for per-pixel RGB residuals (`scratch`: see
+    /// [`Transport::texel_sums`]).
+    pub fn apply_transpose(&self, residual: &[[f64; 3]], grad: &mut [f64], scratch: &mut Vec<f64>) {
+        let sums = self.texel_sums(
+            |p, e| std::array::from_fn(|c| e.weight[c] as f64 * residual[p][c]),
+            scratch,
+        );
         grad.iter_mut().zip(sums).for_each(|(g, s)| *g += s);
     }
 
     /// Per texel and channel, `sum_p weight_p a_pt^2`: the data term's
     /// curvature along that unknown (texel-major RGB).
     pub fn weighted_column_norms(&self, weight: &[f64]) -> Vec<f64> {
-        self.texel_sums(|p, e| e.weight.map(|w| weight[p] * (w as f64).powi(2)))
+        self.texel_sums(|p, e| e.weight.map(|w| weight[p] * (w as f64).powi(2)), &mut Vec::new())
     }
 
     /// How strongly each texel reaches the pixels (the summed luminance of
@@ -201,7 +209,7 @@ impl Transport {
     pub fn confidence(&self) -> Vec<f32> {
         let luminance = |e: &Entry| (0.2126 * e.weight[0] + 0.7152 * e.weight[1] + 0.0722 * e.weight[2]) as f64;
         let freq: Vec<f64> = self
-            .texel_sums(|_, e| [luminance(e), 0.0, 0.0])
+            .texel_sums(|_, e| [luminance(e), 0.0, 0.0], &mut Vec::new())
             .into_iter()
             .step_by(3)
             .collect();
@@ -345,6 +353,7 @@ pub fn solve(
     let mut x = vec![0.0; transport.unknowns()];
     let mut rendered = vec![[0.0; 3]; transport.pixels];
     let mut residual = vec![[0.0; 3]; transport.pixels];
+    let mut scratch = Vec::new();
     let mut objective = |y: &[f64], g: &mut [f64]| -> f64 {
         x.iter_mut().zip(y).zip(&scale).for_each(|((x, y), s)| *x = s * y);
         let x = &x;
@@ -359,7 +368,7 @@ pub fn solve(
         }
         f /= weight_sum;
         g.iter_mut().for_each(|v| *v = 0.0);
-        transport.apply_transpose(&residual, g);
+        transport.apply_transpose(&residual, g, &mut scratch);
         for &(i, j, a) in &pairs {
             for c in 0..3 {
                 let d = x[i * 3 + c] - x[j * 3 + c];
@@ -445,7 +454,7 @@ mod tests {
             .map(|p| [p as f64 - 2.0, 0.5, 1.0 / (p as f64 + 1.0)])
             .collect();
         let mut grad = vec![0.0; transport.unknowns()];
-        transport.apply_transpose(&residual, &mut grad);
+        transport.apply_transpose(&residual, &mut grad, &mut Vec::new());
         let lhs: f64 = rendered
             .iter()
             .zip(&residual)
@@ -479,7 +488,7 @@ mod tests {
                 .expect("pool");
             pool.install(|| {
                 let mut grad = vec![0.0; transport.unknowns()];
-                transport.apply_transpose(&residual, &mut grad);
+                transport.apply_transpose(&residual, &mut grad, &mut Vec::new());
                 grad
             })
         };

@@ -13,9 +13,8 @@
 //!    start, unlike the image loss. The *outline twins* of each axis whose
 //!    outline fits (leaning as far the other way along the view ray, turned
 //!    end for end, or both: [`init::outline_twins`]) are fitted likewise.
-//!    The axes
-//!    whose silhouettes fit (within `AXIS_KEEP_RATIO` (1.5) of the best, at
-//!    most `axes_kept`) go on;
+//!    The axes whose silhouettes fit (within `AXIS_KEEP_RATIO` (1.5) of the
+//!    best, at most `axes_kept`) go on;
 //! 2. *turns*: each kept pose turned about its axis by the yaw starts (a
 //!    turn the silhouette cannot see is taken as is; one that changes the
 //!    silhouette gets a short silhouette refit), then a quick *lighting*
@@ -111,7 +110,7 @@ pub struct Settings {
     /// was solved at: in 34 of the 36 pose phases of the suite of 18 (2
     /// rounds of 20 iterations) the best pose was the start. The other two
     /// were noisy photos, where they count: without rounds the noisy tilted
-    /// studio can ends 5.1 deg off (3.6 with), wall median 6.9 -> 4.2 s.
+    /// studio can ends 5.1 deg off (3.6 with); CPU median 10.0 -> 7.2 s.
     pub rounds: usize,
     /// Adam iterations on the pose per round.
     pub pose_iters: usize,
@@ -123,7 +122,8 @@ pub struct Settings {
     /// can at its true pose: 12.2/2.0/2.7 deg at 64, 9.7/1.1/1.3 at 128,
     /// 7.4/0.8/0.6 at 256): 128 at default quality. Suite of 18: 6.78/1.94/
     /// 2.12 deg at 32, 6.31/1.67/1.70 at 64, 6.16/1.60/1.50 at 128 (wall
-    /// median 7.9 s, max RSS 597 MB), 5.94/1.56/1.45 at 256 (12.6 s).
+    /// median 7.9 s, max RSS 597 MB), 5.94/1.56/1.45 at 256 (12.6 s, on a
+    /// machine shared with builds).
     pub spp_final: u32,
     /// Working env map height (None: from the probe's roughness).
     pub working_height: Option<usize>,
