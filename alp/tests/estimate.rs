@@ -1,7 +1,7 @@
 //! The main job end to end on a small synthetic photo: it must find the
 //! probe where it is and explain the photo; bad inputs are clear errors.
 
-use alp::estimate::{Photo, Quality, Settings, estimate};
+use alp::estimate::{FINAL_SAMPLE_BUDGET, Photo, Quality, Settings, estimate, final_spp};
 use glam::{Quat, Vec3};
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
@@ -92,6 +92,23 @@ fn a_cap_of_one_colour_leaning_away_is_found_the_right_way_up() {
 }
 
 #[test]
+fn the_final_solve_keeps_to_its_sample_budget() {
+    // The suite's largest probe keeps the settings' samples; a probe
+    // filling a 12-megapixel photo gets what the budget allows, and never
+    // less than one pass.
+    assert_eq!(final_spp(128, 51_000), 128);
+    for pixels in [200_000, 1_000_000, 12_000_000] {
+        let spp = final_spp(128, pixels);
+        assert!(spp >= 16, "{pixels} pixels: {spp} spp");
+        assert!(
+            spp == 16 || spp as usize * pixels <= FINAL_SAMPLE_BUDGET,
+            "{pixels} pixels: {spp} spp"
+        );
+    }
+    assert_eq!(final_spp(128, 200_000), 41);
+}
+
+#[test]
 fn bad_photos_are_clear_errors() {
     let (_, _, Photo { image, mask, camera }, _) = scene();
     let empty = Mask::new(160, 120, vec![false; 160 * 120]);
@@ -116,6 +133,10 @@ fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
     settings.known_pose = Some(truth);
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     assert_eq!(result.pose, truth, "a known pose is kept");
+    assert_eq!(
+        result.report.final_spp, settings.spp_final,
+        "a small probe takes every sample"
+    );
     assert_eq!(result.report.chosen_start, None);
     let psnr = result.report.psnr_db;
     assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");

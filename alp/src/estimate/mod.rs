@@ -358,6 +358,10 @@ pub struct Report {
     pub min_roughness: f32,
     /// Pixels excluded as clipped (over-exposed).
     pub clipped_pixels: usize,
+    /// Samples per pixel of the final lighting solve: the settings', or
+    /// fewer for a probe so large in the photo that they would overrun
+    /// [`FINAL_SAMPLE_BUDGET`].
+    pub final_spp: u32,
     /// Every phase, in order.
     pub phases: Vec<PhaseReport>,
     /// Final re-rendering PSNR inside the mask, dB.
@@ -383,9 +387,19 @@ pub struct Estimate {
 /// The env map size the orientation starts are ranked under.
 const RANKING_SIZE: (usize, usize) = (16, 8);
 
-/// Samples per pixel of one pass of a lighting fit's light samples (their
-/// tape's memory grows with them).
+/// Samples per pixel of one pass of a lighting fit's light samples at
+/// most (their tape's memory grows with them).
 const SPP_PER_PASS: u32 = 16;
+
+/// Light samples of one pass at most: a probe large in the photo takes
+/// fewer samples per pixel per pass (the suite's largest, 51k pixels,
+/// takes all 16: 811k samples).
+const PASS_SAMPLES: usize = 1 << 20;
+
+/// Samples per pixel of one pass over a probe of `mask_pixels`.
+fn spp_per_pass(mask_pixels: usize) -> u32 {
+    (PASS_SAMPLES / mask_pixels.max(1)).clamp(1, SPP_PER_PASS as usize) as u32
+}
 
 /// L-BFGS iterations at most on the levels below the finest of a
 /// coarse-to-fine lighting solve.
@@ -404,6 +418,19 @@ pub fn working_height(min_roughness: f32) -> usize {
     let alpha = (min_roughness * min_roughness).max(0.02);
     let rows = std::f32::consts::PI / alpha;
     (1usize << rows.log2().round().clamp(4.0, 6.0) as u32).clamp(16, 64)
+}
+
+/// Light samples of the final lighting solve at most: its memory (the
+/// samples, then the transport) and time grow with them. The suite's
+/// largest probe (51k pixels) at 128 spp takes 6.5M samples and 507 MB.
+pub const FINAL_SAMPLE_BUDGET: usize = 8 << 20;
+
+/// Samples per pixel of the final solve for a probe of `mask_pixels`:
+/// `spp`, or as many as [`FINAL_SAMPLE_BUDGET`] allows, but at least
+/// [`SPP_PER_PASS`].
+pub fn final_spp(spp: u32, mask_pixels: usize) -> u32 {
+    let affordable = FINAL_SAMPLE_BUDGET / mask_pixels.max(1);
+    spp.min(affordable.max(SPP_PER_PASS as usize) as u32)
 }
 
 /// What a lighting fit is for.
@@ -566,11 +593,11 @@ fn fit_lighting(
     purpose: LightingPurpose,
     start: Option<&[f64]>,
 ) -> Result<LightingFit> {
-    // Light samples in passes of at most SPP_PER_PASS samples per pixel,
-    // each on its own tape: memory stays that of one pass however many
-    // samples the transport gathers. The first pass's pixels are the data;
-    // later passes' samples join their pixels (averaged over the passes).
-    let passes = settings.spp.div_ceil(SPP_PER_PASS).max(1);
+    // Light samples in passes (`spp_per_pass`), each on its own tape:
+    // memory stays that of one pass however many samples the transport
+    // gathers. The first pass's pixels are the data; later passes' samples
+    // join their pixels (averaged over the passes).
+    let passes = settings.spp.div_ceil(spp_per_pass(photo.mask.count())).max(1);
     let mut reference: Option<PrimaryHits> = None;
     let mut row = Vec::new();
     let (mut segment, mut wi, mut throughput) = (Vec::new(), Vec::<Vec3>::new(), Vec::<[f32; 3]>::new());
@@ -1385,8 +1412,9 @@ pub fn estimate_with_progress(
         }
     };
     let t1 = Instant::now();
+    let final_spp = final_spp(settings.spp_final, photo.mask.count());
     let final_settings = RenderSettings {
-        spp: settings.spp_final,
+        spp: final_spp,
         seed: settings.seed.wrapping_add(77),
     };
     let fit = fit_lighting(
@@ -1415,6 +1443,7 @@ pub fn estimate_with_progress(
         working_resolution: work,
         min_roughness,
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
+        final_spp,
         phases: phases.phases,
         psnr_db: final_psnr,
         wall_s: t0.elapsed().as_secs_f64(),
