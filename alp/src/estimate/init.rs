@@ -174,32 +174,28 @@ pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3)
 /// whichever of them is nearest its start.
 pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> [Pose; 3] {
     let (lo, hi) = mesh.bounds();
-    let centre = pose.transform_point(0.5 * (lo + hi));
-    let about_centre = |rotation: Quat| {
-        let rotation = rotation.normalize();
-        Pose::new(rotation, pose.scale, centre - rotation * (pose.scale * 0.5 * (lo + hi)))
-    };
-    let view = (centre - camera.origin).normalize();
+    let view = (pose.transform_point(0.5 * (lo + hi)) - camera.origin).normalize();
     let axis = (pose.rotation * Vec3::Y).normalize();
     let mirrored = axis - 2.0 * axis.dot(view) * view;
     let mirror = Quat::from_rotation_arc(axis, mirrored) * pose.rotation;
     let end_for_end = |rotation: Quat| rotation * Quat::from_rotation_x(std::f32::consts::PI);
-    [
-        about_centre(mirror),
-        about_centre(end_for_end(pose.rotation)),
-        about_centre(end_for_end(mirror)),
-    ]
+    [mirror, end_for_end(pose.rotation), end_for_end(mirror)].map(|rotation| rotated(pose, mesh, rotation))
+}
+
+/// `pose` with the orientation `rotation`, the centre of the probe's
+/// bounding box kept in place.
+fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
+    let (lo, hi) = mesh.bounds();
+    let centre = pose.transform_point(0.5 * (lo + hi));
+    let rotation = rotation.normalize();
+    Pose::new(rotation, pose.scale, centre - rotation * (pose.scale * 0.5 * (lo + hi)))
 }
 
 /// `pose` turned by `yaw_deg` about the probe's own axis through the centre
 /// of its bounding box (which stays in place).
 pub fn turned(pose: &Pose, mesh: &Mesh, yaw_deg: f32) -> Pose {
-    let (lo, hi) = mesh.bounds();
-    let centre = pose.transform_point(0.5 * (lo + hi));
     let turn = Quat::from_axis_angle((pose.rotation * Vec3::Y).normalize(), yaw_deg.to_radians());
-    let rotation = (turn * pose.rotation).normalize();
-    let translation = centre - rotation * (pose.scale * 0.5 * (lo + hi));
-    Pose::new(rotation, pose.scale, translation)
+    rotated(pose, mesh, turn * pose.rotation)
 }
 
 #[cfg(test)]

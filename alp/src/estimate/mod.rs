@@ -897,6 +897,8 @@ where
 /// progress running over `progress` (from 0: the decaying priors hold the
 /// start while the silhouette pulls it in; from [`SILHOUETTE_PROGRESS`]:
 /// the silhouette alone): returns the pose, the final loss and the report.
+/// The orientation prior holds the start near its own orientation (one
+/// towards a common orientation would pull every start there).
 fn fit_silhouette(
     ctx: &PoseContext,
     name: &str,
@@ -905,6 +907,10 @@ fn fit_silhouette(
     progress: std::ops::Range<f64>,
     seed: u64,
 ) -> Result<(Pose, f64, PhaseReport)> {
+    let ctx = &PoseContext {
+        front_facing: start.rotation,
+        ..*ctx
+    };
     let iters = iters.max(1);
     let depth = (start.translation - ctx.photo.camera.origin).length();
     fit_pose(name, start, iters, depth, |tape, pose_vars, eval| {
@@ -914,8 +920,25 @@ fn fit_silhouette(
     })
 }
 
-/// The silhouette loss (the objective without rendering, priors spent) at `pose`.
+/// A short silhouette refit of `start` (a turned or mirrored pose), from
+/// where the priors are spent.
+fn refit_silhouette(
+    ctx: &PoseContext,
+    name: &str,
+    start: Pose,
+    settings: &Settings,
+) -> Result<(Pose, f64, PhaseReport)> {
+    let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
+    fit_silhouette(ctx, name, start, settings.silhouette_iters / 2, progress, settings.seed)
+}
+
+/// The silhouette loss (the objective without rendering, priors spent) at
+/// `pose`, the orientation prior towards `pose` itself.
 fn silhouette_loss(ctx: &PoseContext, pose: &Pose, seed: u64) -> Result<f64> {
+    let ctx = PoseContext {
+        front_facing: pose.rotation,
+        ..*ctx
+    };
     let tape = Tape::<f64>::new();
     let pose_vars = PoseVars::new(&tape, &pack_pose(pose), false);
     let evaluation = ctx.evaluate(&tape, &pose_vars, None, SILHOUETTE_PROGRESS, seed)?;
@@ -1083,20 +1106,14 @@ fn search_pose(
     phases.expect_more(hypotheses.len() - 1);
     // Hypotheses and starts are independent and each one's small pose tapes
     // keep about one core busy: they run side by side (results do not
-    // depend on the thread count; reports keep their order). The
-    // orientation prior holds each near its own orientation: a prior
-    // towards one orientation would pull every start there.
+    // depend on the thread count; reports keep their order).
     let fitted: Vec<Result<_>> = hypotheses
         .par_iter()
         .map(|&axis| {
             let start = init::initial_pose(mesh, &photo.camera, &shape, axis);
-            let own = PoseContext {
-                front_facing: start.rotation,
-                ..ctx
-            };
             let progress = 0.0..SILHOUETTE_PROGRESS;
             fit_silhouette(
-                &own,
+                &ctx,
                 "silhouette",
                 start,
                 settings.silhouette_iters,
@@ -1146,15 +1163,7 @@ fn search_pose(
     phases.expect_more(twins.len());
     let fitted: Vec<Result<_>> = twins
         .par_iter()
-        .map(|&(_, twin)| {
-            let own = PoseContext {
-                front_facing: twin.rotation,
-                ..ctx
-            };
-            let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
-            let iters = settings.silhouette_iters / 2;
-            fit_silhouette(&own, "silhouette_twin", twin, iters, progress, settings.seed)
-        })
+        .map(|&(_, twin)| refit_silhouette(&ctx, "silhouette_twin", twin, settings))
         .collect();
     for (result, (a, twin)) in fitted.into_iter().zip(twins) {
         let (pose, loss, report) = result?;
@@ -1190,15 +1199,9 @@ fn search_pose(
     let rank_turn = |a: usize, yaw: f32, refinement: bool| -> Result<RankedStart> {
         let (axis_pose, axis_loss) = axis_poses[a];
         let turned = init::turned(&axis_pose, mesh, yaw);
-        let own = PoseContext {
-            front_facing: turned.rotation,
-            ..ctx
-        };
-        let loss = silhouette_loss(&own, &turned, settings.seed)?;
+        let loss = silhouette_loss(&ctx, &turned, settings.seed)?;
         let (pose, loss, refit) = if loss > TURN_REFIT_RATIO * axis_loss {
-            let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
-            let iters = settings.silhouette_iters / 2;
-            let (pose, loss, report) = fit_silhouette(&own, "silhouette_turn", turned, iters, progress, settings.seed)?;
+            let (pose, loss, report) = refit_silhouette(&ctx, "silhouette_turn", turned, settings)?;
             (pose, loss, Some(report))
         } else {
             (turned, loss, None)
