@@ -30,7 +30,7 @@ use crate::mesh::Mesh;
 use crate::pose::Pose;
 use crate::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use crate::probe::ProbeAsset;
-use crate::sampling::{EnvSampler, Rng};
+use crate::sampling::{EnvSampler, Rng, stratified_square};
 
 /// Monte Carlo settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -70,7 +70,8 @@ pub struct PrimaryHits {
     pub triangle: Vec<u32>,
     /// Per hit sample: the unit ray direction (world).
     pub direction: Vec<Vec3>,
-    /// Per hit sample: two uniform random numbers for the BRDF sample.
+    /// Per hit sample: two uniform random numbers for the BRDF sample (a pixel's together a
+    /// stratified set: `sampling::stratified_square`).
     pub random: Vec<Vec2>,
     /// The seed of the random numbers (the env-map samples draw theirs when needed).
     pub seed: u64,
@@ -172,16 +173,17 @@ impl PrimaryHits {
             .into_par_iter()
             .map(|row| {
                 let mut offsets = vec![Vec2::ZERO; silhouette_spp];
+                let mut lobe_points = vec![Vec2::ZERO; silhouette_spp];
                 let (mut pixels, mut samples, mut rays) = (Vec::new(), Vec::new(), 0);
                 for col in cols.clone() {
                     let pixel = (row * w + col) as u32;
                     let n = if on_silhouette(row, col) { silhouette_spp } else { spp };
                     let offsets = &mut offsets[..n];
                     stratified_offsets(settings.seed, pixel, offsets);
-                    let mut rng = Rng::new(settings.seed, BSDF_STREAM + pixel as u64);
+                    let lobe = &mut lobe_points[..n];
+                    stratified_square(&mut Rng::new(settings.seed, BSDF_STREAM + pixel as u64), lobe);
                     let before = samples.len();
-                    for &offset in offsets.iter() {
-                        let random = rng.next_2d();
+                    for (&offset, &random) in offsets.iter().zip(lobe.iter()) {
                         if let Some((triangle, dir)) = hits_probe(row, col, offset) {
                             samples.push((triangle, dir, random));
                         }

@@ -13,7 +13,7 @@ mod warp;
 pub use distribution::Distribution1D;
 pub use env::{EnvSample, EnvSampler};
 pub use frame::Frame;
-pub use rng::Rng;
+pub use rng::{Rng, stratified_square};
 pub use warp::{
     cosine_hemisphere_pdf, sample_concentric_disk, sample_cosine_hemisphere, sample_linear, sample_uniform_sphere,
     uniform_sphere_pdf,
