@@ -256,16 +256,13 @@ fn soft_mask_is_hard_away_from_the_silhouette_and_half_on_it() {
             })
             .fold(f32::INFINITY, f32::min)
     };
-    let diagonal_distance = |p: Vec2| {
-        let (a, b) = (front[0], front[2]);
-        (b - a).perp_dot(p - a).abs() / (b - a).length()
-    };
     let corner_distance = |p: Vec2| front.iter().map(|c| (p - *c).length()).fold(f32::INFINITY, f32::min);
     let (mut on, mut away) = (0, 0);
     for (i, &value) in image.iter().enumerate() {
         let p = Vec2::new((i % 64) as f32 + 0.5, (i / 64) as f32 + 0.5);
         let (d, hard) = (outline_distance(p), plan.covered()[i] as u8 as f64);
-        if d >= 2.0 && diagonal_distance(p) >= 2.0 {
+        // The face's diagonal (an edge between two front triangles) is no edge of the outline.
+        if d >= 2.0 {
             away += 1;
             assert!(
                 (value - hard).abs() < 1e-3,
@@ -290,6 +287,71 @@ fn soft_mask_is_hard_away_from_the_silhouette_and_half_on_it() {
         "{on} pixels on the outline, {away} away from it"
     );
     assert!(plan.band_pixels().len() > 100 && plan.pair_count() >= plan.band_pixels().len() / 2);
+}
+
+#[test]
+fn a_contour_seen_through_the_probe_is_no_part_of_its_outline() {
+    // Two cubes, the far one half hidden behind the near one: the far cube's contour edges behind
+    // the near cube lie inside the silhouette, and the covered pixels near them stay covered.
+    let cube = render::procedural::unit_cube();
+    let far = |p: Vec3| p + Vec3::new(0.6, 0.4, -2.0);
+    let positions: Vec<Vec3> = cube
+        .positions
+        .iter()
+        .copied()
+        .chain(cube.positions.iter().map(|&p| far(p)))
+        .collect();
+    let n = cube.positions.len() as u32;
+    let triangles: Vec<[u32; 3]> = cube
+        .triangles
+        .iter()
+        .copied()
+        .chain(cube.triangles.iter().map(|t| t.map(|i| i + n)))
+        .collect();
+    let normals = [cube.normals.clone(), cube.normals.clone()].concat();
+    let mesh = Mesh::new(positions, normals, vec![Vec2::ZERO; 2 * n as usize], triangles);
+    let camera = camera();
+    let pose = Pose::new(Quat::IDENTITY, 0.03, Vec3::new(-0.005, 0.058, 0.2));
+    let plan = SilhouettePlan::new(
+        &mesh,
+        &mesh.posed(&pose).positions,
+        &camera,
+        SilhouetteSettings::default(),
+    )
+    .unwrap();
+    let tape = Tape::<f64>::new();
+    let posed = PosedMesh::new(
+        &MeshVars::new(&tape, &mesh),
+        &PoseVars::new(&tape, &pack_pose(&pose), false),
+    );
+    let image = plan.soft_mask(&posed).to_image();
+    let covered = plan.covered();
+    let (width, height) = (camera.width as i32, camera.height as i32);
+    // Distance (pixel centres) to the nearest uncovered pixel, or to the image's border.
+    let outline_distance = |i: i32| {
+        let (x, y) = (i % width, i / width);
+        let mut best = (x + 1).min(y + 1).min(width - x).min(height - y) as f32;
+        for v in 0..height {
+            for u in 0..width {
+                if !covered[(v * width + u) as usize] {
+                    best = best.min((((u - x).pow(2) + (v - y).pow(2)) as f32).sqrt());
+                }
+            }
+        }
+        best
+    };
+    let hidden_contour = plan.contour_edge_count();
+    let mut deep = 0;
+    for i in 0..width * height {
+        if covered[i as usize] && outline_distance(i) >= 2.5 {
+            deep += 1;
+            assert!(image[i as usize] > 0.999, "pixel {i}: soft {}", image[i as usize]);
+        }
+    }
+    assert!(
+        deep > 100 && hidden_contour >= 4,
+        "{deep} deep pixels, {hidden_contour} outline edges"
+    );
 }
 
 #[test]
@@ -385,10 +447,11 @@ fn bad_references_and_poses_are_errors() {
 
 #[test]
 fn mask_losses_are_least_at_the_true_scale() {
-    // The limb's lift of the soft coverage and a Chamfer charge measured to
-    // the reference's pixel centres both favoured a smaller probe (the mask
-    // L1 of this can was least at 0.982 of its scale with sigma 0.5 px^2, the
-    // Chamfer at 0.992; now 0.994 and 0.998).
+    // SoftRas's lift of the coverage on the limb and a Chamfer charge
+    // measured to the reference's pixel centres both favoured a smaller probe
+    // (the mask L1 of this can was least at 0.982 of its scale with sigma
+    // 0.5 px^2, at 0.994 with 0.1, the Chamfer at 0.992; now 0.998 and 1.0:
+    // the grid's step is 0.002).
     // About 75 px tall: a 1 % scale error moves its outline by a third of a pixel.
     let camera = camera_at(128, 96, 0.3);
     let (mesh, truth) = (can(), base_pose());
@@ -435,9 +498,9 @@ fn mask_losses_are_least_at_the_true_scale() {
         scales[k]
     };
     let (l1, chamfer) = (argmin(&|l| l.0), argmin(&|l| l.1));
-    assert!((l1 - 1.0).abs() <= 0.006, "mask L1 least at {l1} x the true scale");
+    assert!((l1 - 1.0).abs() <= 0.002, "mask L1 least at {l1} x the true scale");
     assert!(
-        (chamfer - 1.0).abs() <= 0.006,
+        (chamfer - 1.0).abs() <= 0.002,
         "Chamfer least at {chamfer} x the true scale"
     );
 }

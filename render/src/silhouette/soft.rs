@@ -60,7 +60,8 @@ fn constant<'t, T: Real>(tape: &'t Tape<T>, values: &[f32]) -> Var<'t, T> {
     tape.constant(&v)
 }
 
-/// The soft rendered mask: SoftRas coverage of the band pixels on a tape, hard coverage elsewhere.
+/// The soft rendered mask: soft coverage of the band pixels on a tape (see the module docs of
+/// `silhouette`), hard coverage elsewhere.
 #[derive(Clone, Copy, Debug)]
 pub struct SoftMask<'p, 't, T: Real> {
     plan: &'p SilhouettePlan,
@@ -94,8 +95,8 @@ impl SilhouettePlan {
             (x.gather(end), y.gather(end)),
             (px, py),
         );
-        // 1 - prod_j (1 - D_j) with 1 - sigmoid(z) = exp(-softplus(z)): no product of many
-        // factors near 1, no log of 0.
+        // sigmoid(z) = 1 - exp(-softplus(z)), scattered to the band (a pixel without a pair
+        // sums nothing: coverage 0).
         let log_uncovered = (d2 * signed_inv_sigma)
             .softplus()
             .segmented_sum(band_slot, self.band.len());
