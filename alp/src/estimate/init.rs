@@ -165,21 +165,44 @@ pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3)
     Pose::new(rotation, 1.0, translation)
 }
 
+/// An axis leaning towards or away from the camera by less than this
+/// (degrees) is about its own mirror twin; its twins lean by
+/// [`TWIN_LEAN_DEG`] either way instead.
+const UPRIGHT_LEAN_DEG: f32 = 5.0;
+
+/// The lean (degrees) of the twins of an axis that barely leans.
+const TWIN_LEAN_DEG: f32 = 10.0;
+
 /// The poses whose outline is about that of `pose`, with the probe's
 /// centre in place: its axis mirrored through the plane across the view
 /// ray (an axis leaning towards the camera and one leaning as far away
 /// show the same outline under orthographic projection), the probe turned
 /// end for end (half a turn about its mesh X axis: the same outline where
 /// its two ends have like outlines), and both. A silhouette fit stops on
-/// whichever of them is nearest its start.
-pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> [Pose; 3] {
+/// whichever of them is nearest its start, or, between two mirror images,
+/// on the saddle where the axis crosses the view ray square (a cap leaning
+/// 10 deg away from the view stopped there, 8 deg off): the twins of an
+/// axis within [`UPRIGHT_LEAN_DEG`] of square lean [`TWIN_LEAN_DEG`]
+/// towards and away from the camera, each also end for end.
+pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Vec<Pose> {
     let (lo, hi) = mesh.bounds();
     let view = (pose.transform_point(0.5 * (lo + hi)) - camera.origin).normalize();
     let axis = (pose.rotation * Vec3::Y).normalize();
-    let mirrored = axis - 2.0 * axis.dot(view) * view;
-    let mirror = Quat::from_rotation_arc(axis, mirrored) * pose.rotation;
+    let lean = axis.dot(view).clamp(-1.0, 1.0).asin();
+    let mirrors: Vec<Quat> = match lean.abs() < UPRIGHT_LEAN_DEG.to_radians() {
+        // About `axis x view`, a positive angle leans the axis towards the view ray.
+        true => [TWIN_LEAN_DEG, -TWIN_LEAN_DEG]
+            .map(|to| Quat::from_axis_angle(axis.cross(view).normalize(), to.to_radians() - lean) * pose.rotation)
+            .to_vec(),
+        false => vec![Quat::from_rotation_arc(axis, axis - 2.0 * axis.dot(view) * view) * pose.rotation],
+    };
     let end_for_end = |rotation: Quat| rotation * Quat::from_rotation_x(std::f32::consts::PI);
-    [mirror, end_for_end(pose.rotation), end_for_end(mirror)].map(|rotation| rotated(pose, mesh, rotation))
+    let mut rotations = vec![end_for_end(pose.rotation)];
+    rotations.extend(mirrors.into_iter().flat_map(|m| [m, end_for_end(m)]));
+    rotations
+        .into_iter()
+        .map(|rotation| rotated(pose, mesh, rotation))
+        .collect()
 }
 
 /// `pose` with the orientation `rotation`, the centre of the probe's
@@ -294,7 +317,8 @@ mod tests {
         let lean = |deg: f32| Quat::from_rotation_x(deg.to_radians());
         let pose = Pose::new(lean(20.0), 1.0, -(lean(20.0) * centre));
         let twins = outline_twins(&pose, &probe.mesh, &camera);
-        let wants = [lean(-20.0) * Vec3::Y, -(lean(20.0) * Vec3::Y), -(lean(-20.0) * Vec3::Y)];
+        let wants = [-(lean(20.0) * Vec3::Y), lean(-20.0) * Vec3::Y, -(lean(-20.0) * Vec3::Y)];
+        assert_eq!(twins.len(), wants.len());
         let outline = |pose: &Pose| can_mask(&probe, &camera, pose).inside;
         let seen = outline(&pose);
         let area = seen.iter().filter(|&&x| x).count();
@@ -305,6 +329,35 @@ mod tests {
             let differ = outline(twin).iter().zip(&seen).filter(|(x, y)| x != y).count();
             // Perspective and the can's unlike ends: a fringe.
             assert!(differ * 8 < area, "{differ} of {area} pixels differ");
+        }
+    }
+
+    #[test]
+    fn the_twins_of_an_axis_square_to_the_view_lean_either_way() {
+        // Its mirror image would be itself: its twins lean 10 deg away
+        // from and towards the camera (the camera is on +z, so a turn about
+        // +x by a positive angle tips the top towards it), each also end
+        // for end.
+        let probe = SodaCan::default().build();
+        let camera = camera(0.0, 0.0);
+        let (lo, hi) = probe.mesh.bounds();
+        let centre = 0.5 * (lo + hi);
+        let lean = |deg: f32| Quat::from_rotation_x(deg.to_radians());
+        let pose = Pose::new(lean(2.0), 1.0, -(lean(2.0) * centre));
+        let axes: Vec<Vec3> = outline_twins(&pose, &probe.mesh, &camera)
+            .iter()
+            .map(|twin| twin.rotation * Vec3::Y)
+            .collect();
+        let wants = [
+            -(lean(2.0) * Vec3::Y),
+            lean(-10.0) * Vec3::Y,
+            -(lean(-10.0) * Vec3::Y),
+            lean(10.0) * Vec3::Y,
+            -(lean(10.0) * Vec3::Y),
+        ];
+        assert_eq!(axes.len(), wants.len());
+        for (axis, want) in axes.iter().zip(wants) {
+            assert!((*axis - want).length() < 1e-4, "axis {axis} vs {want}");
         }
     }
 

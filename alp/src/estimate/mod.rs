@@ -11,8 +11,9 @@
 //!    and the orientation prior (towards the hypothesis's own orientation;
 //!    both decaying to zero), which are defined and informative from any
 //!    start, unlike the image loss. The *outline twins* of each axis whose
-//!    outline fits (leaning as far the other way along the view ray, turned
-//!    end for end, or both: [`init::outline_twins`]) are fitted likewise.
+//!    outline fits (leaning as far the other way along the view ray, or
+//!    10 deg either way when it crosses the ray about square, turned end
+//!    for end, or both: [`init::outline_twins`]) are fitted likewise.
 //!    The axes whose silhouettes fit (within `AXIS_KEEP_RATIO` (1.5) of the
 //!    best, at most `axes_kept`) go on;
 //! 2. *turns*: each kept pose turned about its axis by the yaw starts (a
