@@ -60,6 +60,18 @@ fn plan_at(mesh: &Mesh, pose: &Pose, settings: SilhouetteSettings) -> Silhouette
     SilhouettePlan::new(mesh, &mesh.posed(pose).positions, &camera(), settings).unwrap()
 }
 
+/// The plan of `mesh` at `pose` under the default settings, and its soft mask as an image.
+fn soft_image_at(mesh: &Mesh, pose: &Pose) -> (SilhouettePlan, Vec<f64>) {
+    let plan = plan_at(mesh, pose, SilhouetteSettings::default());
+    let tape = Tape::<f64>::new();
+    let posed = PosedMesh::new(
+        &MeshVars::new(&tape, mesh),
+        &PoseVars::new(&tape, &pack_pose(pose), false),
+    );
+    let image = plan.soft_mask(&posed).to_image();
+    (plan, image)
+}
+
 /// The hard mask of the can at `pose`, as a reference.
 fn reference_at(mesh: &Mesh, pose: &Pose) -> ReferenceMask {
     ReferenceMask::new(&plan_at(mesh, pose, SMOOTH).hard_mask()).unwrap()
@@ -224,20 +236,7 @@ fn soft_mask_is_hard_away_from_the_silhouette_and_half_on_it() {
     let mesh = render::procedural::unit_cube();
     let camera = camera();
     let pose = Pose::new(Quat::from_rotation_z(0.3), 0.03, Vec3::new(0.0, 0.061, 0.055));
-    let plan = SilhouettePlan::new(
-        &mesh,
-        &mesh.posed(&pose).positions,
-        &camera,
-        SilhouetteSettings::default(),
-    )
-    .unwrap();
-    let tape = Tape::<f64>::new();
-    let posed = PosedMesh::new(
-        &MeshVars::new(&tape, &mesh),
-        &PoseVars::new(&tape, &pack_pose(&pose), false),
-    );
-    let soft = plan.soft_mask(&posed);
-    let image = soft.to_image();
+    let (plan, image) = soft_image_at(&mesh, &pose);
     // The front face's corners in pixels, and the distance of a point to its outline.
     let front: Vec<Vec2> = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
         .iter()
@@ -312,19 +311,7 @@ fn a_contour_seen_through_the_probe_is_no_part_of_its_outline() {
     let mesh = Mesh::new(positions, normals, vec![Vec2::ZERO; 2 * n as usize], triangles);
     let camera = camera();
     let pose = Pose::new(Quat::IDENTITY, 0.03, Vec3::new(-0.005, 0.058, 0.2));
-    let plan = SilhouettePlan::new(
-        &mesh,
-        &mesh.posed(&pose).positions,
-        &camera,
-        SilhouetteSettings::default(),
-    )
-    .unwrap();
-    let tape = Tape::<f64>::new();
-    let posed = PosedMesh::new(
-        &MeshVars::new(&tape, &mesh),
-        &PoseVars::new(&tape, &pack_pose(&pose), false),
-    );
-    let image = plan.soft_mask(&posed).to_image();
+    let (plan, image) = soft_image_at(&mesh, &pose);
     let covered = plan.covered();
     let (width, height) = (camera.width as i32, camera.height as i32);
     // Distance (pixel centres) to the nearest uncovered pixel, or to the image's border.

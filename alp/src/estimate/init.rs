@@ -307,15 +307,25 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_outline_twins_lean_as_far_the_other_way_or_turn_end_for_end_and_show_the_same_outline() {
+    /// A turn by `deg` about +x: a positive one tips the top towards a camera on +z.
+    fn lean(deg: f32) -> Quat {
+        Quat::from_rotation_x(deg.to_radians())
+    }
+
+    /// The can leaning `deg` ([`lean`]) with its centre on the view axis of
+    /// a camera level with it: the probe, the camera, its centre and pose.
+    fn can_leaning(deg: f32) -> (render::probe::ProbeAsset, Camera, Vec3, Pose) {
         let probe = SodaCan::default().build();
-        let camera = camera(0.0, 0.0);
         let (lo, hi) = probe.mesh.bounds();
         let centre = 0.5 * (lo + hi);
-        // Leaning 20 degrees towards the camera (+z), centred on the view axis.
-        let lean = |deg: f32| Quat::from_rotation_x(deg.to_radians());
-        let pose = Pose::new(lean(20.0), 1.0, -(lean(20.0) * centre));
+        let pose = Pose::new(lean(deg), 1.0, -(lean(deg) * centre));
+        (probe, camera(0.0, 0.0), centre, pose)
+    }
+
+    #[test]
+    fn the_outline_twins_lean_as_far_the_other_way_or_turn_end_for_end_and_show_the_same_outline() {
+        // Leaning 20 degrees towards the camera (+z).
+        let (probe, camera, centre, pose) = can_leaning(20.0);
         let twins = outline_twins(&pose, &probe.mesh, &camera);
         let wants = [-(lean(20.0) * Vec3::Y), lean(-20.0) * Vec3::Y, -(lean(-20.0) * Vec3::Y)];
         assert_eq!(twins.len(), wants.len());
@@ -338,12 +348,7 @@ mod tests {
         // from and towards the camera (the camera is on +z, so a turn about
         // +x by a positive angle tips the top towards it), each also end
         // for end.
-        let probe = SodaCan::default().build();
-        let camera = camera(0.0, 0.0);
-        let (lo, hi) = probe.mesh.bounds();
-        let centre = 0.5 * (lo + hi);
-        let lean = |deg: f32| Quat::from_rotation_x(deg.to_radians());
-        let pose = Pose::new(lean(2.0), 1.0, -(lean(2.0) * centre));
+        let (probe, camera, _, pose) = can_leaning(2.0);
         let axes: Vec<Vec3> = outline_twins(&pose, &probe.mesh, &camera)
             .iter()
             .map(|twin| twin.rotation * Vec3::Y)
