@@ -50,7 +50,7 @@ pub struct EstimateArgs {
     pub env_size: String,
     /// Joint rounds after the search: the pose by the objective's image and
     /// mask terms under a fixed map, then the map at the new pose (default:
-    /// the quality's: 1, 2, 3 for fast, default, best).
+    /// none, at every quality).
     #[arg(long)]
     pub rounds: Option<usize>,
 }

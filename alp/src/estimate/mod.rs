@@ -26,11 +26,12 @@
 //!    about its axis (two turns render alike) has no pattern to place: one
 //!    turn per axis, ranked by silhouette loss.
 //!
-//! Then, from the best start, *joint* refinement by alternation
-//! (`Settings::rounds`): the pose by Adam on the whole objective (by default
-//! relative L1 on RGB inside the mask plus the mask terms) with the
-//! lighting fixed, and the lighting by the linear solve at the new pose
-//! (exact for that pose, which thousands of noisy Adam steps are not).
+//! Then, on request (`Settings::rounds`, none by default: measured there),
+//! *joint* refinement by alternation from the best start: the pose by Adam
+//! on the whole objective (by default relative L1 on RGB inside the mask
+//! plus the mask terms) with the lighting fixed, and the lighting by the
+//! linear solve at the new pose (exact for that pose, which thousands of
+//! noisy Adam steps are not).
 //! The map is a final solve at more samples per pixel, with the output's
 //! weighting (`LightingPurpose::Output`), coarse to fine from a constant
 //! map (started from the search's map, whose small pose errors it
@@ -107,11 +108,14 @@ pub struct Settings {
     pub silhouette_iters: usize,
     /// Joint rounds after the search: the pose by Adam on the whole
     /// objective under the map solved at the pose so far, then the map at
-    /// the new pose. That map explains the photo best at the very pose it
-    /// was solved at: in 34 of the 36 pose phases of the suite of 18 (2
-    /// rounds of 20 iterations) the best pose was the start. The other two
-    /// were noisy photos, where they count: without rounds the noisy tilted
-    /// studio can ends 5.1 deg off (3.6 with); CPU median 10.0 -> 7.2 s.
+    /// the new pose. None by default: that map explains the photo best at
+    /// the very pose it was solved at, and with the silhouettes now within
+    /// 0.2 px the first Adam step only leaves it. With 2 rounds at default
+    /// quality, every pose phase of the suite of 18 kept its start (the
+    /// outputs are byte-identical without them, 2.4 s sooner; the same at
+    /// fast quality on 6 scenes); at best quality 3 rounds moved 2 poses of
+    /// 3, both for the worse (the tilted courtyard can's diffuse error 0.42
+    /// -> 3.31 deg, the upright studio can's turn 1.2 -> 6.0 deg).
     pub rounds: usize,
     /// Adam iterations on the pose per round.
     pub pose_iters: usize,
@@ -155,9 +159,9 @@ impl Settings {
     /// The preset for `quality`.
     pub fn new(quality: Quality) -> Self {
         let (starts_deg, axes_kept, silhouette_iters, rounds, pose_iters, spp_pose, spp_final) = match quality {
-            Quality::Fast => (yaws(4), 2, 40, 1, 15, 1, 8),
-            Quality::Default => (yaws(8), 3, 50, 2, 20, 2, 128),
-            Quality::Best => (yaws(12), 4, 100, 3, 40, 4, 256),
+            Quality::Fast => (yaws(4), 2, 40, 0, 15, 1, 8),
+            Quality::Default => (yaws(8), 3, 50, 0, 20, 2, 128),
+            Quality::Best => (yaws(12), 4, 100, 0, 40, 4, 256),
         };
         Settings {
             quality,
