@@ -109,8 +109,9 @@ pub struct Settings {
     /// Joint rounds after the search: the pose by Adam on the whole
     /// objective under the map solved at the pose so far, then the map at
     /// the new pose. None by default: that map explains the photo best at
-    /// the very pose it was solved at, and with the silhouettes now within
-    /// 0.2 px the first Adam step only leaves it. With 2 rounds at default
+    /// the very pose it was solved at, and with the searched pose now
+    /// 0.17 px off in the image on average, the first Adam step only
+    /// leaves it. With 2 rounds at default
     /// quality, every pose phase of the suite of 18 kept its start (the
     /// outputs are byte-identical without them, 2.4 s sooner; the same at
     /// fast quality on 6 scenes); at best quality 3 rounds moved 2 poses of
@@ -1280,11 +1281,12 @@ fn search_pose(
     // Colour ranks the starts of a probe with a pattern. A probe symmetric
     // about its axis shows none: a coarse map explains it about as well
     // either end up (a lying cap of one colour: 7.76 deg upside down, 7.82
-    // the right way up), and the starts go by their outlines (the least
-    // silhouette loss was within 1 deg of the true axis on all 9 cap scenes
-    // of the suite). Their margin between a cap's ends can be small: 38 %
-    // on the lying courtyard cap, but 1.6 %, the wrong way, with a soft
-    // mask free of SoftRas's limb bias (branch outline-soft-mask).
+    // the right way up), and the starts go by their outlines (at default
+    // quality the least silhouette loss was within 1 deg of the true axis
+    // on all 9 cap scenes of the suite). Their margin between a cap's ends can be small: on
+    // the lying courtyard cap the two ends' silhouette losses are 1.6 %
+    // apart (38 % under SoftRas, whose limb bias made much of it), and the
+    // suite's default run took the right end, its fast run the wrong one.
     let best_of = |starts: &[StartReport]| {
         (1..starts.len()).fold(0, |best, k| {
             let above = match symmetric {

@@ -3,9 +3,9 @@
 //!
 //! The work is split in two, so that finite differences see a smooth function:
 //! - [`SilhouettePlan`] (not differentiated, rebuilt every iteration at the current pose) makes
-//!   every discrete choice: the hard coverage, the band of pixels around the silhouette, which
-//!   triangles can reach each band pixel, whether the pixel is inside each of them and which of
-//!   its edges is nearest, and the projected silhouette (contour) edges.
+//!   every discrete choice: the hard coverage, the band of pixels around the silhouette, the
+//!   outline (the projected contour edges with the probe on one side only), and for each band
+//!   pixel the nearest feature (edge or vertex) of the silhouette's edge.
 //! - [`SoftMask`] evaluates, on a tape, the soft coverage of the band pixels, differentiable in
 //!   the vertex positions and hence in the pose, from the distance `d(p)` (pixels) of the pixel
 //!   centre to the silhouette's edge:
@@ -24,7 +24,8 @@
 //! front triangles sharing an edge give a pixel centred on it 0.75, and the thin foreshortened
 //! triangles crowding along the limb of a curved object lift the coverage on the silhouette
 //! above one half; mask fits from the true pose of the 18 scenes of the evaluation suite shrank
-//! the probe by 0.2-0.9 % (0.02-0.14 % with the distance to the edge).
+//! the probe by 0.14-0.9 % (mean 0.36 %); with the distance to the edge they stay within 0.21 %
+//! either way (mean 0.02 % small).
 //!
 //! ```no_run
 //! use autodiff::Tape;
