@@ -327,7 +327,7 @@ fn a_contour_seen_through_the_probe_is_no_part_of_its_outline() {
         }
         best
     };
-    let hidden_contour = plan.contour_edge_count();
+    let outline_edges = plan.contour_edge_count();
     let mut deep = 0;
     for i in 0..width * height {
         if covered[i as usize] && outline_distance(i) >= 2.5 {
@@ -336,8 +336,8 @@ fn a_contour_seen_through_the_probe_is_no_part_of_its_outline() {
         }
     }
     assert!(
-        deep > 100 && hidden_contour >= 4,
-        "{deep} deep pixels, {hidden_contour} outline edges"
+        deep > 100 && outline_edges >= 4,
+        "{deep} deep pixels, {outline_edges} outline edges"
     );
 }
 

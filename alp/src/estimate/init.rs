@@ -180,25 +180,29 @@ const TWIN_LEAN_DEG: f32 = 10.0;
 /// end for end (half a turn about its mesh X axis: the same outline where
 /// its two ends have like outlines), and both. A silhouette fit stops on
 /// whichever of them is nearest its start, or, between two mirror images,
-/// on the saddle where the axis crosses the view ray square (a cap leaning
-/// 10 deg away from the view stopped there, 8 deg off): the twins of an
-/// axis within [`UPRIGHT_LEAN_DEG`] of square lean [`TWIN_LEAN_DEG`]
-/// towards and away from the camera, each also end for end.
+/// on the saddle where the axis crosses the view ray square (the cap of
+/// tests/estimate.rs, 10 deg from square, stopped there 5.3 deg off its
+/// axis): the twins of an axis within [`UPRIGHT_LEAN_DEG`] of square lean
+/// [`TWIN_LEAN_DEG`] towards and away from the camera, each also end for
+/// end.
 pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Vec<Pose> {
     let (lo, hi) = mesh.bounds();
     let view = (pose.transform_point(0.5 * (lo + hi)) - camera.origin).normalize();
     let axis = (pose.rotation * Vec3::Y).normalize();
     let lean = axis.dot(view).clamp(-1.0, 1.0).asin();
-    let mirrors: Vec<Quat> = match lean.abs() < UPRIGHT_LEAN_DEG.to_radians() {
-        // About `axis x view`, a positive angle leans the axis towards the view ray.
-        true => [TWIN_LEAN_DEG, -TWIN_LEAN_DEG]
-            .map(|to| Quat::from_axis_angle(axis.cross(view).normalize(), to.to_radians() - lean) * pose.rotation)
-            .to_vec(),
-        false => vec![Quat::from_rotation_arc(axis, axis - 2.0 * axis.dot(view) * view) * pose.rotation],
+    let leans = match lean.abs() < UPRIGHT_LEAN_DEG.to_radians() {
+        true => vec![TWIN_LEAN_DEG.to_radians(), -TWIN_LEAN_DEG.to_radians()],
+        false => vec![-lean],
     };
+    // About `axis x view`, a positive angle leans the axis towards the view
+    // ray (any axis square to the probe's, for an axis along the ray).
+    let tip = axis.cross(view).normalize_or(axis.any_orthonormal_vector());
     let end_for_end = |rotation: Quat| rotation * Quat::from_rotation_x(std::f32::consts::PI);
     let mut rotations = vec![end_for_end(pose.rotation)];
-    rotations.extend(mirrors.into_iter().flat_map(|m| [m, end_for_end(m)]));
+    for to in leans {
+        let mirror = Quat::from_axis_angle(tip, to - lean) * pose.rotation;
+        rotations.extend([mirror, end_for_end(mirror)]);
+    }
     rotations
         .into_iter()
         .map(|rotation| rotated(pose, mesh, rotation))
