@@ -5,10 +5,9 @@
 //! bounded L-BFGS on cheap sparse products instead of thousands of noisy
 //! Adam steps through the renderer (ARCHITECTURE.md).
 
-use glam::Vec3;
+use glam::Vec2;
 use optim::{Bounds, Lbfgs, Solver};
 use rayon::prelude::*;
-use render::envmap::direction_to_uv;
 
 /// One entry of the transport: a texel and the RGB weight with which it
 /// reaches a pixel.
@@ -46,10 +45,9 @@ fn pixel_chunk(chunk: usize, pixels: usize) -> std::ops::Range<usize> {
     chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(pixels)
 }
 
-/// The four texels and weights of a bilinear lookup at direction `d`
-/// (FORMATS.md: texel centres at +0.5, wrap in u, clamp in v).
-pub fn bilinear_taps(d: Vec3, width: usize, height: usize) -> ([u32; 4], [f32; 4]) {
-    let uv = direction_to_uv(d);
+/// The four texels and weights of a bilinear lookup at map coordinates
+/// `uv` (FORMATS.md: texel centres at +0.5, wrap in u, clamp in v).
+pub fn bilinear_taps(uv: Vec2, width: usize, height: usize) -> ([u32; 4], [f32; 4]) {
     let x = uv.x * width as f32 - 0.5;
     let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
     let (x0, y0) = (x.floor(), y.floor());
@@ -66,11 +64,11 @@ pub fn bilinear_taps(d: Vec3, width: usize, height: usize) -> ([u32; 4], [f32; 4
 }
 
 impl Transport {
-    /// The transport of light samples (`segments`, directions, throughputs)
-    /// onto a `width x height` env map.
+    /// The transport of light samples (`segments`, the map coordinates of
+    /// their directions, throughputs) onto a `width x height` env map.
     pub fn new(
         segment: &[u32],
-        wi: &[Vec3],
+        uv: &[Vec2],
         throughput: &[[f32; 3]],
         pixels: usize,
         width: usize,
@@ -81,9 +79,12 @@ impl Transport {
             "Transport: env maps are 2:1, got {width}x{height}"
         );
         // Samples grouped by pixel (a counting sort: passes append their
-        // samples pixel by pixel), then each pixel's taps merged per texel,
-        // chunks of pixels in parallel, each into one buffer (per-pixel
-        // buffers left the allocator holding hundreds of MB).
+        // samples pixel by pixel), then each pixel's taps merged per texel
+        // (`slot`: where a texel's entry is in the pixel's row), the row
+        // sorted by texel; chunks of pixels in parallel, each into one
+        // buffer (per-pixel buffers left the allocator holding hundreds of
+        // MB). Merging before sorting sorts a row's texels, not its taps:
+        // four per sample.
         let sample_start = key_starts(segment.iter().map(|&p| p as usize), pixels);
         let mut by_pixel = vec![0u32; segment.len()];
         let mut next = sample_start.clone();
@@ -95,31 +96,34 @@ impl Transport {
             .into_par_iter()
             .map(|chunk| {
                 let mut lengths = Vec::with_capacity(PIXEL_CHUNK);
-                let (mut entries, mut taps): (Vec<Entry>, Vec<Entry>) = (Vec::new(), Vec::new());
+                let mut entries: Vec<Entry> = Vec::new();
+                let mut slot = vec![u32::MAX; width * height];
                 for p in pixel_chunk(chunk, pixels) {
-                    taps.clear();
+                    let row_begin = entries.len();
+                    // Each texel's weights add up in sample order.
                     for &k in &by_pixel[sample_start[p]..sample_start[p + 1]] {
-                        let (texels, weights) = bilinear_taps(wi[k as usize], width, height);
+                        let (texels, weights) = bilinear_taps(uv[k as usize], width, height);
                         for (&index, &w) in texels.iter().zip(&weights) {
-                            if w > 0.0 {
-                                taps.push(Entry {
-                                    index,
-                                    weight: throughput[k as usize].map(|c| c * w),
-                                });
+                            if w <= 0.0 {
+                                continue;
+                            }
+                            let weight = throughput[k as usize].map(|c| c * w);
+                            match slot[index as usize] {
+                                u32::MAX => {
+                                    slot[index as usize] = (entries.len() - row_begin) as u32;
+                                    entries.push(Entry { index, weight });
+                                }
+                                at => {
+                                    let e = &mut entries[row_begin + at as usize];
+                                    (0..3).for_each(|c| e.weight[c] += weight[c]);
+                                }
                             }
                         }
                     }
-                    // Stable: each texel's weights add up in sample order.
-                    taps.sort_by_key(|e| e.index);
-                    let row_begin = entries.len();
-                    for &e in &taps {
-                        let this_row = &mut entries[row_begin..];
-                        match this_row.last_mut() {
-                            Some(last) if last.index == e.index => (0..3).for_each(|c| last.weight[c] += e.weight[c]),
-                            _ => entries.push(e),
-                        }
-                    }
-                    lengths.push(entries.len() - row_begin);
+                    let row = &mut entries[row_begin..];
+                    row.iter().for_each(|e| slot[e.index as usize] = u32::MAX);
+                    row.sort_unstable_by_key(|e| e.index);
+                    lengths.push(row.len());
                 }
                 (lengths, entries)
             })
@@ -281,8 +285,7 @@ pub fn resample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec
         for c in 0..to.0 {
             let u = (c as f32 + 0.5) / to.0 as f32;
             let v = (r as f32 + 0.5) / to.1 as f32;
-            let d = render::envmap::uv_to_direction(glam::Vec2::new(u, v));
-            let (taps, weights) = bilinear_taps(d, from.0, from.1);
+            let (taps, weights) = bilinear_taps(Vec2::new(u, v), from.0, from.1);
             for ch in 0..3 {
                 out.push(
                     taps.iter()
@@ -444,7 +447,7 @@ mod tests {
         let env = EnvMap::new(w, h, texels.clone()).expect("env");
         for k in 0..200 {
             let d = uv_to_direction(glam::Vec2::new((k as f32 * 0.37).fract(), (k as f32 * 0.61).fract()));
-            let (t, wt) = bilinear_taps(d, w, h);
+            let (t, wt) = bilinear_taps(render::envmap::direction_to_uv(d), w, h);
             let got: f32 = t.iter().zip(&wt).map(|(&t, &wt)| texels[t as usize][0] * wt).sum();
             assert!(
                 (got - env.lookup(d)[0]).abs() < 1e-3,
@@ -464,19 +467,18 @@ mod tests {
             .collect();
         let map = EnvMap::new(w, h, texels).expect("env");
         // Several samples per pixel, some reading the same texels (merged).
-        let (mut segment, mut wi, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..60u32 {
-            let uv = glam::Vec2::new((k as f32 * 0.137).fract(), (k as f32 * 0.291).fract());
             segment.push(k % pixels as u32);
-            wi.push(uv_to_direction(uv));
+            uv.push(Vec2::new((k as f32 * 0.137).fract(), (k as f32 * 0.291).fract()));
             throughput.push([0.5 + 0.01 * k as f32, 0.3, 0.1]);
         }
-        let transport = Transport::new(&segment, &wi, &throughput, pixels, w, h);
+        let transport = Transport::new(&segment, &uv, &throughput, pixels, w, h);
         let mut rendered = vec![[0.0; 3]; pixels];
         transport.apply(&env, &mut rendered);
         let mut want = vec![[0.0f64; 3]; pixels];
-        for ((&p, &d), t) in segment.iter().zip(&wi).zip(&throughput) {
-            let l = map.lookup(d);
+        for ((&p, &uv), t) in segment.iter().zip(&uv).zip(&throughput) {
+            let l = map.lookup(uv_to_direction(uv));
             (0..3).for_each(|c| want[p as usize][c] += (t[c] * l[c]) as f64);
         }
         for (a, b) in rendered.iter().zip(&want) {
@@ -508,14 +510,13 @@ mod tests {
         let (w, h) = (16, 8);
         // More pixels than one chunk holds, each reading several texels.
         let pixels = 2 * PIXEL_CHUNK + 77;
-        let (mut segment, mut wi, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..4 * pixels as u32 {
-            let uv = glam::Vec2::new((k as f32 * 0.1373).fract(), (k as f32 * 0.2917).fract());
             segment.push(k / 4);
-            wi.push(uv_to_direction(uv));
+            uv.push(Vec2::new((k as f32 * 0.1373).fract(), (k as f32 * 0.2917).fract()));
             throughput.push([0.1 + (k % 13) as f32 * 0.37, 0.3, 1e-3 * k as f32]);
         }
-        let transport = Transport::new(&segment, &wi, &throughput, pixels, w, h);
+        let transport = Transport::new(&segment, &uv, &throughput, pixels, w, h);
         let residual: Vec<[f64; 3]> = (0..pixels).map(|p| [(p as f64).sin(), 1e-7 * p as f64, 3.0]).collect();
         let env: Vec<f64> = (0..w * h * 3).map(|i| 0.1 + (i % 7) as f64).collect();
         let transposed = |threads: usize| {
@@ -540,24 +541,18 @@ mod tests {
     fn recovers_a_map_seen_whole(throughput: impl Fn(usize) -> f32, max_iters: usize) {
         let (w, h) = (8, 4);
         let truth: Vec<f64> = (0..w * h * 3).map(|i| 0.5 + (i % 7) as f64 * 0.3).collect();
-        let mut wi = Vec::new();
-        for r in 0..h {
-            for c in 0..w {
-                wi.push(uv_to_direction(glam::Vec2::new(
-                    (c as f32 + 0.5) / w as f32,
-                    (r as f32 + 0.5) / h as f32,
-                )));
-            }
-        }
-        let segment: Vec<u32> = (0..wi.len() as u32).collect();
-        let throughputs: Vec<[f32; 3]> = (0..wi.len()).map(|t| [throughput(t); 3]).collect();
-        let transport = Transport::new(&segment, &wi, &throughputs, wi.len(), w, h);
-        let mut target = vec![[0.0; 3]; wi.len()];
+        let uv: Vec<Vec2> = (0..w * h)
+            .map(|t| Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32))
+            .collect();
+        let segment: Vec<u32> = (0..uv.len() as u32).collect();
+        let throughputs: Vec<[f32; 3]> = (0..uv.len()).map(|t| [throughput(t); 3]).collect();
+        let transport = Transport::new(&segment, &uv, &throughputs, uv.len(), w, h);
+        let mut target = vec![[0.0; 3]; uv.len()];
         transport.apply(&truth, &mut target);
         let (x, evals) = solve(
             &transport,
             &target,
-            &vec![1.0; wi.len()],
+            &vec![1.0; uv.len()],
             LightingSolve {
                 smoothness: 0.0,
                 relative_smoothness: false,

@@ -50,12 +50,12 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use autodiff::Tape;
-use glam::{Quat, Vec3};
+use glam::{Quat, Vec2, Vec3};
 use optim::{Adam, ParamGroup, Solver};
 use rayon::prelude::*;
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
-use render::envmap::EnvMap;
+use render::envmap::{EnvMap, direction_to_uv};
 use render::image_io::{Mask, RgbImage};
 use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, light_samples};
 use render::lookup::ImageVars;
@@ -609,7 +609,7 @@ fn fit_lighting(
     let passes = settings.spp.div_ceil(spp_per_pass(photo.mask.count())).max(1);
     let mut reference: Option<PrimaryHits> = None;
     let mut row = Vec::new();
-    let (mut segment, mut wi, mut throughput) = (Vec::new(), Vec::<Vec3>::new(), Vec::<[f32; 3]>::new());
+    let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::<Vec2>::new(), Vec::<[f32; 3]>::new());
     for pass in 0..passes {
         let pass_settings = RenderSettings {
             spp: settings.spp.div_ceil(passes),
@@ -649,7 +649,7 @@ fn fit_lighting(
             let r = row[hits.pixels[seg as usize] as usize];
             if r != u32::MAX {
                 segment.push(r);
-                wi.push(Vec3::new(d[0][i], d[1][i], d[2][i]));
+                uv.push(direction_to_uv(Vec3::new(d[0][i], d[1][i], d[2][i])));
                 throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
             }
         }
@@ -672,7 +672,7 @@ fn fit_lighting(
         relative_smoothness: purpose == LightingPurpose::Output,
         max_iters: 300,
     };
-    let at = |(w, h): (usize, usize)| Transport::new(&segment, &wi, &throughput, hits.pixels.len(), w, h);
+    let at = |(w, h): (usize, usize)| Transport::new(&segment, &uv, &throughput, hits.pixels.len(), w, h);
     let (transport, env, evaluations) = match start {
         Some(x0) => {
             let transport = at(size);
