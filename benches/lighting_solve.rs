@@ -1,0 +1,80 @@
+//! The output map's lighting phase at a known pose, as `alp estimate --pose`
+//! runs it: light samples, the sparse transport at each level of the
+//! coarse-to-fine pyramid, and the bounded L-BFGS solves. The procedural can
+//! of the demo scene (640x480, courtyard) at 32 and 128 spp of the final
+//! solve; 1 and 2 threads. One JSON object per line.
+//!
+//! `cargo bench --bench lighting_solve`
+
+use std::time::Instant;
+
+use alp::estimate::{Photo, Quality, Settings, estimate};
+use render::bsdf::GgxMetal;
+use render::camera::Camera;
+use render::envmap::EnvMap;
+use render::integrator::{RenderSettings, render_image};
+use render::pose::Pose;
+use render::procedural::SodaCan;
+use serde_json::json;
+
+/// Timed runs per case (after one warm-up run).
+const RUNS: usize = 3;
+
+fn assets() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
+}
+
+fn main() {
+    let probe = SodaCan::default().build();
+    let camera = Camera::read(assets().join("demo/camera.json")).expect("demo camera");
+    let pose = Pose::read(assets().join("demo/pose.json")).expect("demo pose");
+    let truth = EnvMap::read(assets().join("envmaps/courtyard.exr")).expect("env map");
+    let (image, mask) = render_image(
+        &probe,
+        &pose,
+        &camera,
+        &truth,
+        &GgxMetal,
+        &RenderSettings { spp: 64, seed: 99 },
+    );
+    let photo = Photo::new(image, mask, camera).expect("a valid photo");
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            for spp in [32, 128] {
+                eprintln!("lighting_solve spp={spp} threads={threads}");
+                let mut settings = Settings::new(Quality::Default);
+                settings.spp_final = spp;
+                settings.known_pose = Some(pose);
+                let mut times = Vec::new();
+                let mut last = None;
+                for _ in 0..=RUNS {
+                    let t0 = Instant::now();
+                    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+                    times.push(t0.elapsed().as_secs_f64());
+                    last = Some(result.report);
+                }
+                let report = last.expect("at least one run");
+                let warm = &mut times[1..];
+                warm.sort_by(f64::total_cmp);
+                let phase = report.phases.last().expect("the final solve's phase");
+                println!(
+                    "{}",
+                    json!({
+                        "bench": "lighting_solve", "impl": "transport_lbfgs", "mode": "known_pose",
+                        "spp": report.final_spp, "threads": threads,
+                        "median_s": warm[warm.len() / 2], "min_s": warm[0], "runs": warm.len(),
+                        "check": {
+                            "psnr_db": report.psnr_db, "evaluations": phase.evaluations,
+                            "working_resolution": report.working_resolution,
+                            "pixels": photo.mask.count(),
+                        }
+                    })
+                );
+            }
+        });
+    }
+}
