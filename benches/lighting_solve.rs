@@ -9,35 +9,23 @@
 use std::time::Instant;
 
 use alp::estimate::{Photo, Quality, Settings, estimate};
-use render::bsdf::GgxMetal;
-use render::camera::Camera;
-use render::envmap::EnvMap;
-use render::integrator::{RenderSettings, render_image};
-use render::pose::Pose;
-use render::procedural::SodaCan;
 use serde_json::json;
 
 /// Timed runs per case (after one warm-up run).
 const RUNS: usize = 3;
 
-fn assets() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
+mod demo;
 
 fn main() {
-    let probe = SodaCan::default().build();
-    let camera = Camera::read(assets().join("demo/camera.json")).expect("demo camera");
-    let pose = Pose::read(assets().join("demo/pose.json")).expect("demo pose");
-    let truth = EnvMap::read(assets().join("envmaps/courtyard.exr")).expect("env map");
-    let (image, mask) = render_image(
-        &probe,
-        &pose,
-        &camera,
-        &truth,
-        &GgxMetal,
-        &RenderSettings { spp: 64, seed: 99 },
-    );
-    let photo = Photo::new(image, mask, camera).expect("a valid photo");
+    let demo::Demo {
+        probe,
+        camera,
+        pose,
+        photo,
+        mask,
+        ..
+    } = demo::scene();
+    let photo = Photo::new(photo, mask, camera).expect("a valid photo");
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

@@ -10,33 +10,24 @@ use std::time::{Duration, Instant};
 
 use autodiff::Tape;
 use render::bsdf::GgxMetal;
-use render::camera::Camera;
 use render::envmap::EnvMap;
-use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, render_image, shade};
+use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, shade};
 use render::lookup::ImageVars;
-use render::pose::Pose;
 use render::posed::{PoseVars, PosedMesh, pack_pose};
-use render::procedural::SodaCan;
 use serde_json::json;
 
-fn assets() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
-}
+mod demo;
 
 fn main() {
-    let probe = SodaCan::default().build();
-    let camera = Camera::read(assets().join("demo/camera.json")).expect("demo camera");
-    let pose = Pose::read(assets().join("demo/pose.json")).expect("demo pose");
-    let truth = EnvMap::read(assets().join("envmaps/courtyard.exr")).expect("env map");
+    let demo::Demo {
+        probe,
+        camera,
+        pose,
+        env: truth,
+        photo,
+        ..
+    } = demo::scene();
     let env = truth.downsample(64);
-    let (photo, _) = render_image(
-        &probe,
-        &pose,
-        &camera,
-        &truth,
-        &GgxMetal,
-        &RenderSettings { spp: 64, seed: 99 },
-    );
     let start_env = EnvMap::constant(64, [0.5; 3]);
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
