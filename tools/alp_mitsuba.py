@@ -314,12 +314,12 @@ def scene_dict(mi, probe, pose, cam, env, spp, integrator, crop=None, seed=0, fo
     }
 
 
-def make_unoccluded_integrator(mi, albedo_texture=None, visibility_texture=None):
+def make_direct_integrator(mi, albedo_texture=None, visibility_texture=None):
     """Our forward model as a Mitsuba integrator: at the first hit, direct lighting from the
-    environment with NO occlusion test (our renderer has no shadow rays: the visibility texture
-    stands in for self-occlusion), times the visibility texture; primary rays that miss are
-    black. Estimator: one emitter sample + one BSDF sample combined by MIS (balance heuristic);
-    it converges to the same integral as our BSDF-only estimator.
+    environment with shadow rays (the probe shadows itself; no inter-reflection), times the
+    visibility texture; primary rays that miss are black. Estimator: one emitter sample + one
+    BSDF sample combined by MIS (balance heuristic); it converges to the same integral as our
+    BSDF-only estimator.
 
     With `albedo_texture` the scene's BSDF must have specular_reflectance 1 (`material: none`,
     i.e. F = 1) and this integrator multiplies each sample by Schlick's
@@ -332,7 +332,7 @@ def make_unoccluded_integrator(mi, albedo_texture=None, visibility_texture=None)
         c = dr.abs(dr.dot(h, wi))
         return a + (1.0 - a) * dr.power(dr.maximum(1.0 - c, 0.0), 5)
 
-    class Unoccluded(mi.SamplingIntegrator):
+    class Direct(mi.SamplingIntegrator):
         def __init__(self, props=mi.Properties()):
             super().__init__(props)
             self.albedo = albedo_texture
@@ -347,8 +347,8 @@ def make_unoccluded_integrator(mi, albedo_texture=None, visibility_texture=None)
             result = mi.Spectrum(0.0)
             a = self.albedo.eval(si, valid) if self.albedo is not None else None
 
-            # Emitter sampling, occlusion not tested.
-            ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(valid), False, valid)
+            # Emitter sampling, with a shadow ray.
+            ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(valid), True, valid)
             wo = si.to_local(ds.d)
             bval, bpdf = bsdf.eval_pdf(ctx, si, wo, valid)
             w_em = dr.select(ds.delta, 1.0, ds.pdf / (ds.pdf + bpdf))
@@ -357,9 +357,11 @@ def make_unoccluded_integrator(mi, albedo_texture=None, visibility_texture=None)
                 c_em *= schlick(a, si.wi, wo)
             result += dr.select(valid & (ds.pdf > 0), c_em, 0.0)
 
-            # BSDF sampling; the environment is looked up in the sampled direction.
+            # BSDF sampling; the environment is looked up in the sampled direction unless the
+            # probe is in the way.
             bs, bweight = bsdf.sample(ctx, si, sampler.next_1d(valid), sampler.next_2d(valid), valid)
             d = si.to_world(bs.wo)
+            lit = valid & ~scene.ray_test(si.spawn_ray(d), valid)
             sie = dr.zeros(mi.SurfaceInteraction3f)
             sie.wi = -d
             sie.wavelengths = si.wavelengths
@@ -372,7 +374,7 @@ def make_unoccluded_integrator(mi, albedo_texture=None, visibility_texture=None)
             c_bs = bweight * le * w_bs
             if a is not None:
                 c_bs *= schlick(a, si.wi, bs.wo)
-            result += dr.select(valid & (bs.pdf > 0), c_bs, 0.0)
+            result += dr.select(lit & (bs.pdf > 0), c_bs, 0.0)
 
             if self.vis is not None:
                 result *= self.vis.eval_1(si, valid)
@@ -382,6 +384,6 @@ def make_unoccluded_integrator(mi, albedo_texture=None, visibility_texture=None)
             return []
 
         def to_string(self):
-            return "Unoccluded[]"
+            return "Direct[]"
 
-    return Unoccluded()
+    return Direct()

@@ -3,7 +3,7 @@
 
     python3 mitsuba_compare.py --probe DIR --pose pose.json --camera camera.json --env env.exr \
         --spp N [--ours image.exr [--mask mask.png] | --alp-bin PATH] \
-        [--variant scalar_rgb|llvm_ad_rgb] [--integrator unoccluded|path] [--out-dir DIR]
+        [--variant scalar_rgb|llvm_ad_rgb] [--integrator direct|path] [--out-dir DIR]
 
 Prints ONE JSON line on stdout (metrics over the probe pixels: pixels fully covered by the probe
 in Mitsuba's coverage, eroded by one pixel, and in our mask when one is given, also eroded):
@@ -20,10 +20,10 @@ The model (PAPER.md / FORMATS.md) in Mitsuba terms: the OBJ with to_world = pose
 `roughconductor` (GGX, alpha = r^2, `material: none`, `specular_reflectance` = albedo) or a
 smooth `conductor` for r = 0; the `envmap` emitter from our EXR resampled to Mitsuba's rows
 (alp_mitsuba.env_to_mitsuba); a `perspective` sensor (fov_axis y, look_at, box filter).
-Integrator `unoccluded` (default on LLVM): direct lighting at the first hit with NO occlusion
-test, times the visibility texture, with Schlick's Fresnel applied per sample (`--fresnel
-schlick`, default): our model exactly; `path` (max_depth 2, hide_emitters): Mitsuba's own, which
-DOES test occlusion (differs on concave parts) and folds the visibility into the reflectance.
+Integrator `direct` (default on LLVM): direct lighting at the first hit with shadow rays, times
+the visibility texture, with Schlick's Fresnel applied per sample (`--fresnel schlick`, default):
+our model exactly; `path` (max_depth 2, hide_emitters): Mitsuba's own, which folds the
+visibility into the reflectance and has only the conductor's Fresnel.
 `--fresnel none` shows the known difference: Mitsuba's `material: none` Fresnel is
 1 x reflectance, ours Schlick with F0 = albedo (identical for albedo 1; otherwise ours is
 brighter towards grazing angles).
@@ -49,18 +49,18 @@ def render_mitsuba(mi, probe, pose, cam, env, spp, integrator_kind, crop, pass_s
     npx = (x1 - x0) * (y1 - y0)
     per_pass = max(1, min(spp, pass_samples // max(npx, 1)))
     white = False
-    if integrator_kind == "unoccluded":
+    if integrator_kind == "direct":
         # the visibility is applied by the integrator (a texture or a constant), never folded
         white = fresnel == "schlick"
         fold = False
         vis = probe["visibility"]
         vis_tex = mi.load_dict(am._texture(mi, vis, 1) if isinstance(vis, np.ndarray)
                                else {"type": "uniform", "value": float(vis)})
-        integ_dict = am.make_unoccluded_integrator(
+        integ_dict = am.make_direct_integrator(
             mi, mi.load_dict(am._texture(mi, probe["albedo"], 3)) if white else None, vis_tex)
     elif integrator_kind == "path":
         if fresnel == "schlick":
-            sys.exit("--fresnel schlick needs --integrator unoccluded (Mitsuba's own integrators "
+            sys.exit("--fresnel schlick needs --integrator direct (Mitsuba's own integrators "
                      "only have the conductor Fresnel)")
         fold = True
         integ_dict = {"type": "path", "max_depth": 2, "hide_emitters": True}
@@ -158,11 +158,11 @@ def main():
                     help="with --alp-bin: render ours a second time (seed + 1) to estimate its noise")
     ap.add_argument("--variant", default=None, choices=["scalar_rgb", "llvm_ad_rgb"],
                     help="default llvm_ad_rgb if libLLVM 19 is found, else scalar_rgb")
-    ap.add_argument("--integrator", default=None, choices=["unoccluded", "path"],
-                    help="default: unoccluded on LLVM, path on scalar (a Python integrator is "
+    ap.add_argument("--integrator", default=None, choices=["direct", "path"],
+                    help="default: direct on LLVM, path on scalar (a Python integrator is "
                          "called per sample in scalar variants: slow)")
     ap.add_argument("--fresnel", default=None, choices=["schlick", "none"],
-                    help="schlick (default with unoccluded): ours exactly, Schlick applied in the "
+                    help="schlick (default with direct): ours exactly, Schlick applied in the "
                          "integrator; none: Mitsuba's `material: none` (F = 1 x albedo)")
     ap.add_argument("--out-dir", default="mitsuba_compare_out")
     ap.add_argument("--pass-samples", type=int, default=1 << 22,
@@ -174,8 +174,8 @@ def main():
     if variant is None:
         import glob
         variant = "llvm_ad_rgb" if (os.environ.get("DRJIT_LIBLLVM_PATH") or glob.glob(am.LLVM_GLOB)) else "scalar_rgb"
-    integ = a.integrator or ("unoccluded" if variant.startswith("llvm") else "path")
-    fresnel = a.fresnel or ("schlick" if integ == "unoccluded" else "none")
+    integ = a.integrator or ("direct" if variant.startswith("llvm") else "path")
+    fresnel = a.fresnel or ("schlick" if integ == "direct" else "none")
     mi = am.setup_variant(variant)
     mi.set_log_level(mi.LogLevel.Error)  # scalar variants warn about the maps' tiny negative texels
     os.makedirs(a.out_dir, exist_ok=True)

@@ -42,11 +42,11 @@ for env in $ENVS; do
     D="$OUT/${k}_$env"
     run --probe "$OUT/probes/$k" --pose "$OUT/scenes/pose_$k.json" --camera "$OUT/scenes/camera.json" \
         --env "$E" --spp "$ROUGH_SPP" --alp-bin "$ALP" --ours-noise --out-dir "$D/schlick" \
-        --label "$k/$env: ours vs mitsuba (schlick, unoccluded)"
+        --label "$k/$env: ours vs mitsuba (schlick, direct)"
     run --probe "$OUT/probes/$k" --pose "$OUT/scenes/pose_$k.json" --camera "$OUT/scenes/camera.json" \
         --env "$E" --spp "$ROUGH_SPP" --ours "$D/schlick/ours.exr" --mask "$D/schlick/ours_mask.png" \
         --fresnel none --out-dir "$D/fresnel_none" \
-        --label "$k/$env: ours vs mitsuba (material none, unoccluded)"
+        --label "$k/$env: ours vs mitsuba (material none, direct)"
   done
   # 3. the cap with Mitsuba's own path integrator (occlusion tested, visibility folded)
   D="$OUT/cap_$env"

@@ -1,12 +1,15 @@
 //! The forward model (PAPER.md): direct image-based lighting of the probe,
 //!
-//!   L(wo) = v(x) * integral of L_env(wi) f(wi, wo) cos(theta_i) dwi,
+//!   L(wo) = v(x) * integral of L_env(wi) V(x, wi) f(wi, wo) cos(theta_i) dwi,
 //!
 //! estimated per sub-pixel sample with one BRDF sample (the BRDF's own
 //! importance sampling: GGX visible normals for the metal), or with one BRDF
 //! and one env-map sample combined by multiple importance sampling
 //! ([`LightSampling`]), times the soft visibility texture v, averaged into
-//! pixels.
+//! pixels. V is 0 where the probe itself blocks the light (a shadow ray
+//! against its mesh): a concave probe's recesses (a can's lid, a cap's
+//! inside) do not see the sky above them. Inter-reflections are left out;
+//! v stands in for them where a probe asset fits it.
 //!
 //! Two steps: [`PrimaryHits::trace`] finds which triangle each sub-pixel
 //! sample sees (a BVH, not differentiated); [`shade`] recomputes the hit
@@ -14,7 +17,10 @@
 //! tape), so the image is differentiable in the pose through the hit point,
 //! the interpolated normal and uv, and in the env map, the textures and the
 //! roughness. Silhouette changes are not differentiated here: the soft masks
-//! of `silhouette` carry them.
+//! of `silhouette` carry them; nor are shadow edges moving with the pose (V
+//! is a constant of each sample).
+
+use std::sync::Arc;
 
 use autodiff::{Real, Tape, Var, Vec3 as Vec3Var};
 use glam::{Vec2, Vec3};
@@ -75,6 +81,38 @@ pub struct PrimaryHits {
     pub random: Vec<Vec2>,
     /// The seed of the random numbers (the env-map samples draw theirs when needed).
     pub seed: u64,
+    /// Per hit sample: the point it sees (world), where its shadow rays start.
+    pub point: Vec<Vec3>,
+    /// The posed probe, which shadows itself (`None` only on a default value).
+    pub occluder: Option<Arc<Occluder>>,
+}
+
+/// The posed probe as the occluder of its own light: shadow rays from its surface.
+pub struct Occluder {
+    accel: Accel,
+    /// Shadow rays start this far from their point: past the rounding of
+    /// the hit, so a ray does not hit the triangle it leaves.
+    t_min: f32,
+}
+
+/// Shadow rays start this fraction of the probe's bounding-box diagonal
+/// from their point (0.1 mm on a 12-cm can): far above f32 rounding at
+/// world coordinates of a metre, far below any feature of a probe.
+const SHADOW_OFFSET: f32 = 1e-3;
+
+impl std::fmt::Debug for Occluder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Occluder")
+            .field("t_min", &self.t_min)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Occluder {
+    /// Whether light arriving from `direction` (world, unit) reaches `point` on the probe.
+    pub fn lit(&self, point: Vec3, direction: Vec3) -> bool {
+        !self.accel.occluded(point, direction, self.t_min, f32::INFINITY)
+    }
 }
 
 /// Start of the random number streams of the BRDF samples (plus the pixel
@@ -120,6 +158,10 @@ impl PrimaryHits {
             ..mesh.clone()
         };
         let accel = Accel::new(&world);
+        let (lo, hi) = posed.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+            (lo.min(p), hi.max(p))
+        });
+        let t_min = SHADOW_OFFSET * (hi - lo).length();
         let (w, h) = (camera.width as usize, camera.height as usize);
         let (mut x0, mut y0, mut x1, mut y1) = (f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
         let mut all_in_front = true;
@@ -144,7 +186,7 @@ impl PrimaryHits {
             let (origin, dir) = camera.primary_ray(row as u32, col as u32, offset);
             accel
                 .closest_hit(origin, dir, f32::INFINITY)
-                .map(|hit| (hit.triangle, dir))
+                .map(|hit| (hit.triangle, dir, origin + hit.t * dir))
         };
         // Whether each pixel corner of the box sees the probe (corner (r, c) is
         // pixel (r, c)'s top left), when refining.
@@ -167,7 +209,7 @@ impl PrimaryHits {
         };
         // Per row, in parallel: the hit pixels (index, samples, hit count),
         // the hit samples in pixel order, and the rays traced.
-        type RowHits = (Vec<(u32, u32, u32)>, Vec<(u32, Vec3, Vec2)>, usize);
+        type RowHits = (Vec<(u32, u32, u32)>, Vec<(u32, Vec3, Vec3, Vec2)>, usize);
         let per_row: Vec<RowHits> = rows
             .clone()
             .into_par_iter()
@@ -184,8 +226,8 @@ impl PrimaryHits {
                     stratified_square(&mut Rng::new(settings.seed, BSDF_STREAM + pixel as u64), lobe);
                     let before = samples.len();
                     for (&offset, &random) in offsets.iter().zip(lobe.iter()) {
-                        if let Some((triangle, dir)) = hits_probe(row, col, offset) {
-                            samples.push((triangle, dir, random));
+                        if let Some((triangle, dir, point)) = hits_probe(row, col, offset) {
+                            samples.push((triangle, dir, point, random));
                         }
                     }
                     rays += n;
@@ -211,15 +253,41 @@ impl PrimaryHits {
                 hits.pixels.push(pixel);
                 hits.samples.push(n);
                 hits.coverage.push(count as f32 / n as f32);
-                for (triangle, dir, random) in samples.by_ref().take(count as usize) {
+                for (triangle, dir, point, random) in samples.by_ref().take(count as usize) {
                     hits.segment.push(segment);
                     hits.triangle.push(triangle);
                     hits.direction.push(dir);
+                    hits.point.push(point);
                     hits.random.push(random);
                 }
             }
         }
+        hits.occluder = Some(Arc::new(Occluder { accel, t_min }));
         hits
+    }
+
+    /// Per hit sample, 1 where light from its direction in `directions`
+    /// (world, unit; x, y, z arrays aligned with the hit samples) reaches
+    /// its point, 0 where the probe blocks it.
+    pub fn unshadowed<T: Real>(&self, directions: [&[T]; 3]) -> Vec<T> {
+        let occluder = self
+            .occluder
+            .as_ref()
+            .expect("PrimaryHits::unshadowed: hits made by trace");
+        assert!(
+            directions.iter().all(|d| d.len() == self.point.len()),
+            "PrimaryHits::unshadowed: one direction per hit sample"
+        );
+        (0..self.point.len())
+            .into_par_iter()
+            .map(|i| {
+                let d = directions.map(|d| d[i].to_f32().unwrap_or(f32::NAN));
+                match occluder.lit(self.point[i], Vec3::from_array(d)) {
+                    true => T::one(),
+                    false => T::zero(),
+                }
+            })
+            .collect()
     }
 
     /// Number of hit samples.
@@ -354,8 +422,11 @@ impl<'t, T: Real> Recip for Var<'t, T> {
 pub struct LightSamples<'t, T: Real> {
     /// World direction of the sample (towards the light).
     pub wi: Vec3Var<'t, T>,
-    /// `visibility * f cos / pdf * (MIS weight) / (the pixel's samples)`, RGB.
+    /// `shadow * visibility * f cos / pdf * (MIS weight) / (the pixel's samples)`, RGB.
     pub throughput: [Var<'t, T>; 3],
+    /// The shadow test: 1 where the light reaches the sample's point, 0
+    /// where the probe blocks it (a constant).
+    pub lit: Var<'t, T>,
     /// The sample's position in `hits.pixels`.
     pub segment: Var<'t, T>,
     /// Number of pixels (segments).
@@ -459,10 +530,17 @@ pub fn light_samples_with<'t, T: Real>(
     let scale = visibility * s.pixel_share;
     let sample = bsdf.sample(&surface, wo, s.random);
     let wi = ts.scale(sample.wi.x) + tt.scale(sample.wi.y) + n.scale(sample.wi.z);
+    let unshadowed = |w: Vec3Var<'t, T>| {
+        let d = [w.x, w.y, w.z].map(|c| tape.to_vec(c));
+        tape.constant(&hits.unshadowed([&d[0], &d[1], &d[2]]))
+    };
+    let lit = unshadowed(wi);
+    let scale_bsdf = scale * lit;
     let LightSampling::Mis(sampler) = sampling else {
         return LightSamples {
             wi,
-            throughput: sample.weight.map(|w| w * scale),
+            throughput: sample.weight.map(|w| w * scale_bsdf),
+            lit,
             segment: s.segment,
             pixels: hits.pixels.len(),
         };
@@ -475,7 +553,7 @@ pub fn light_samples_with<'t, T: Real>(
     let lobe = p_bsdf.gt(zero);
     let p_env = EnvPdfVars::new(tape, sampler).pdf(wi);
     let w_bsdf = lobe.select(p_bsdf / lobe.select(p_bsdf + p_env, one), one);
-    let bsdf_scale = scale * w_bsdf;
+    let bsdf_scale = scale_bsdf * w_bsdf;
     // The env sample: f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q)
     // with q = 1 / p_e, which is 0 on a pole (p_e infinite there).
     // Each pixel's stream gives its hit samples one pair of numbers each, in order.
@@ -500,11 +578,13 @@ pub fn light_samples_with<'t, T: Real>(
     let wi_env_local = to_local(wi_env);
     let f_cos = bsdf.eval(&surface, wo, wi_env_local);
     let p_bsdf_env = bsdf.pdf(&surface, wo, wi_env_local);
-    let env_scale = scale * q / p_bsdf_env.mul_add(q, one);
+    let lit_env = unshadowed(wi_env);
+    let env_scale = scale * lit_env * q / p_bsdf_env.mul_add(q, one);
     let both = |a: Var<'t, T>, b: Var<'t, T>| tape.concat(&[a, b]);
     LightSamples {
         wi: Vec3Var::new(both(wi.x, wi_env.x), both(wi.y, wi_env.y), both(wi.z, wi_env.z)),
         throughput: std::array::from_fn(|c| both(sample.weight[c] * bsdf_scale, f_cos[c] * env_scale)),
+        lit: both(lit, lit_env),
         segment: both(s.segment, s.segment),
         pixels: hits.pixels.len(),
     }

@@ -616,3 +616,76 @@ fn each_pixel_averages_its_own_samples() {
         );
     }
 }
+
+/// A mirror floor (y = 0) half under a roof (y = 0.5 over x < 0, facing
+/// down), both 2 m square, seen from above and in front.
+fn floor_under_roof() -> (ProbeAsset, Camera) {
+    let positions = vec![
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, -1.0),
+        Vec3::new(1.0, 0.0, 1.0),
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(-1.0, 0.5, -1.0),
+        Vec3::new(0.0, 0.5, -1.0),
+        Vec3::new(0.0, 0.5, 1.0),
+        Vec3::new(-1.0, 0.5, 1.0),
+    ];
+    let normals = [[Vec3::Y; 4], [Vec3::NEG_Y; 4]].concat();
+    let uvs = [[glam::Vec2::ZERO, glam::Vec2::X, glam::Vec2::ONE, glam::Vec2::Y]; 2].concat();
+    let triangles = vec![[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7]];
+    let probe = ProbeAsset {
+        name: "floor under a roof".into(),
+        mesh: Mesh::new(positions, normals, uvs, triangles),
+        albedo: Texture::constant([1.0; 3]),
+        roughness: Texture::constant([0.0; 3]),
+        visibility: Texture::constant([1.0; 3]),
+    };
+    let camera = Camera::new(48, 48, 60.0, Vec3::new(0.3, 2.5, 2.5), Vec3::ZERO, Vec3::Y).expect("camera");
+    (probe, camera)
+}
+
+#[test]
+fn the_probe_shadows_itself() {
+    let (probe, camera) = floor_under_roof();
+    let env = EnvMap::new(8, 4, vec![[1.0; 3]; 32]).expect("a constant map");
+    let settings = RenderSettings { spp: 4, seed: 3 };
+    let (hits, rgb) = render(
+        &probe,
+        &Pose::IDENTITY,
+        &camera,
+        &env,
+        &Mirror,
+        settings,
+        &LightSampling::Bsdf,
+    );
+    // Each floor sample reflects about +Y; its light is 1 unless the
+    // reflected ray meets the roof (y = 0.5, -1 < x < 0, -1 < z < 1).
+    let mut want = vec![0.0f64; hits.pixels.len()];
+    let mut on_floor = vec![true; hits.pixels.len()];
+    for i in 0..hits.len() {
+        let (p, d) = (hits.point[i], hits.direction[i]);
+        let k = hits.segment[i] as usize;
+        if p.y > 0.25 {
+            on_floor[k] = false;
+            continue;
+        }
+        let r = Vec3::new(d.x, -d.y, d.z);
+        let at_roof = p + r * ((0.5 - p.y) / r.y);
+        let blocked = (-1.0..0.0).contains(&at_roof.x) && (-1.0..1.0).contains(&at_roof.z);
+        want[k] += if blocked { 0.0 } else { 1.0 / settings.spp as f64 };
+    }
+    let (mut shadowed, mut lit, mut worst) = (0, 0, 0.0f64);
+    for k in (0..hits.pixels.len()).filter(|&k| on_floor[k] && hits.coverage[k] == 1.0) {
+        shadowed += (want[k] == 0.0) as usize;
+        lit += (want[k] == 1.0) as usize;
+        worst = (0..3).map(|c| (rgb[c][k] - want[k]).abs()).fold(worst, f64::max);
+    }
+    assert!(
+        shadowed > 20 && lit > 20,
+        "the view must show both: {shadowed} shadowed, {lit} lit"
+    );
+    assert!(
+        worst < 1e-4,
+        "the floor's light differs from its shadow test by up to {worst}"
+    );
+}

@@ -94,7 +94,7 @@ fn soda_can_label_and_bare_metal() {
 }
 
 #[test]
-fn thermos_cap_recess_is_darker() {
+fn thermos_cap_recess_is_rougher() {
     let cap = ThermosCap::default().build();
     check_closed_and_outward("thermos cap", &cap.mesh);
     let (min, max) = bounds(&cap.mesh);
@@ -102,8 +102,8 @@ fn thermos_cap_recess_is_darker() {
     // Near the end of the profile: the recess floor; near the start: the base.
     let floor = cap.material(Vec2::new(0.3, 0.98));
     let base = cap.material(Vec2::new(0.3, 0.02));
-    assert!(floor.visibility < 0.6, "recess floor visibility {}", floor.visibility);
-    assert_eq!(base.visibility, 1.0);
+    // The renderer traces the recess's shadows: no darkening stands in for them.
+    assert_eq!((floor.visibility, base.visibility), (1.0, 1.0));
     assert!(floor.roughness > base.roughness);
 }
 

@@ -102,6 +102,10 @@ impl Transport {
                     let row_begin = entries.len();
                     // Each texel's weights add up in sample order.
                     for &k in &by_pixel[sample_start[p]..sample_start[p + 1]] {
+                        // A sample the probe shadows reads no texel: no entries.
+                        if throughput[k as usize] == [0.0; 3] {
+                            continue;
+                        }
                         let (texels, weights) = bilinear_taps(uv[k as usize], width, height);
                         for (&index, &w) in texels.iter().zip(&weights) {
                             if w <= 0.0 {

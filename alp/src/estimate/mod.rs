@@ -614,6 +614,7 @@ fn fit_lighting(
     let mut reference: Option<PrimaryHits> = None;
     let mut row = Vec::new();
     let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::<Vec2>::new(), Vec::<[f32; 3]>::new());
+    let mut lit = Vec::new();
     for pass in 0..passes {
         let pass_settings = RenderSettings {
             spp: settings.spp.div_ceil(passes),
@@ -649,12 +650,14 @@ fn fit_lighting(
         );
         let d = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
         let tp = samples.throughput.map(|t| tape.to_vec(t));
+        let pass_lit = tape.to_vec(samples.lit);
         for (i, &seg) in hits.segment.iter().enumerate() {
             let r = row[hits.pixels[seg as usize] as usize];
             if r != u32::MAX {
                 segment.push(r);
                 uv.push(direction_to_uv(Vec3::new(d[0][i], d[1][i], d[2][i])));
                 throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
+                lit.push(pass_lit[i] > 0.5);
             }
         }
         if pass == 0 {
@@ -664,7 +667,7 @@ fn fit_lighting(
     let hits = reference.expect("at least one pass");
     let (target, mut weight) = pixel_targets(photo, &hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
-        let edges = albedo_edges(&hits, &row, &segment, &throughput, photo.camera.width as usize);
+        let edges = albedo_edges(&hits, &row, &segment, &throughput, &lit, photo.camera.width as usize);
         weight
             .iter_mut()
             .zip(&edges)
@@ -733,16 +736,37 @@ fn fit_lighting(
 }
 
 /// Pixels on an edge of the probe's reflectance (its albedo or roughness
-/// changes between the pixel and a 4-neighbour: their summed sample
-/// throughputs, the pixels' directional albedos, differ by more than
-/// [`EDGE_CONTRAST`]): a pose off by a fraction of a pixel puts the photo's
-/// edge elsewhere, and the output map would take the probe's colours in
-/// (a label's red in the sky). `row` maps image pixels to `hits.pixels`.
-fn albedo_edges(hits: &PrimaryHits, row: &[u32], segment: &[u32], throughput: &[[f32; 3]], width: usize) -> Vec<bool> {
+/// changes between the pixel and a 4-neighbour: their directional
+/// albedos, the mean throughputs of their samples that the probe does not
+/// shadow, differ by more than [`EDGE_CONTRAST`]): a pose off by a fraction
+/// of a pixel puts the photo's edge elsewhere, and the output map would
+/// take the probe's colours in (a label's red in the sky). An edge of a
+/// shadow is none: it moves with the pose smoothly, as the shading does.
+/// (Counted as edges, the pixels along the probe's own shadows were left
+/// out, and with them the sky only they see: the suite's tilted courtyard
+/// can, path-traced by Mitsuba, at its true pose scored 6.93 / 6.06 / 8.50
+/// deg mirror / shiny / diffuse, against 6.46 / 0.99 / 0.99.) `row` maps
+/// image pixels to `hits.pixels`.
+fn albedo_edges(
+    hits: &PrimaryHits,
+    row: &[u32],
+    segment: &[u32],
+    throughput: &[[f32; 3]],
+    lit: &[bool],
+    width: usize,
+) -> Vec<bool> {
     let mut albedo = vec![[0.0f64; 3]; hits.pixels.len()];
-    for (&s, t) in segment.iter().zip(throughput) {
+    let mut counts = vec![(0u32, 0u32); hits.pixels.len()];
+    for ((&s, t), &l) in segment.iter().zip(throughput).zip(lit) {
         (0..3).for_each(|c| albedo[s as usize][c] += t[c] as f64);
+        counts[s as usize].0 += 1;
+        counts[s as usize].1 += l as u32;
     }
+    // A pixel in full shadow tells nothing of its albedo: no edge there.
+    albedo.iter_mut().zip(&counts).for_each(|(a, &(all, lit))| match lit {
+        0 => *a = [f64::NAN; 3],
+        lit => a.iter_mut().for_each(|v| *v *= all as f64 / lit as f64),
+    });
     let contrast = |a: [f64; 3], b: [f64; 3]| {
         let d: f64 = (0..3).map(|c| (a[c] - b[c]).abs()).sum();
         d / (a.iter().sum::<f64>() + b.iter().sum::<f64>()).max(1e-30)

@@ -1,6 +1,6 @@
 //! A stainless-steel thermos cap: a 72 mm wide, 50 mm tall cup-like cylinder with a 22 mm deep
-//! concave recess on top, whose visibility texture darkens towards the recess floor
-//! (self-occlusion that the renderer does not trace).
+//! concave recess on top. The recess's walls shadow its floor: the renderer traces that, so the
+//! visibility texture is 1 everywhere.
 
 use glam::Vec2;
 
@@ -56,7 +56,7 @@ impl ThermosCap {
         Profile::new(&corners, self.profile_step)
     }
 
-    /// Builds the cap with its roughness and visibility textures.
+    /// Builds the cap with its roughness texture.
     pub fn build(&self) -> ProbeAsset {
         let profile = self.profile();
         let mesh = surface_of_revolution(&profile, self.segments);
@@ -70,17 +70,12 @@ impl ThermosCap {
                 STEEL_ROUGHNESS
             }; 3]
         });
-        // Visibility falls from 0.9 at the recess lip to 0.5 on its floor.
-        let visibility = profile.bake(width, height, |_, p| {
-            let depth = ((TOP - p.y) / (TOP - RECESS_FLOOR)).clamp(0.0, 1.0);
-            [if in_recess(p) { 0.9 - 0.4 * depth } else { 1.0 }; 3]
-        });
         ProbeAsset {
             name: "thermos_cap".into(),
             mesh,
             albedo: Texture::constant(STEEL),
             roughness: Texture { image: roughness },
-            visibility: Texture { image: visibility },
+            visibility: Texture::constant([1.0; 3]),
         }
     }
 }
