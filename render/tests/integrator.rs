@@ -52,6 +52,24 @@ fn render(
     (hits, values)
 }
 
+/// [`render`] of a mirror at its mesh's frame, BRDF-sampled.
+fn render_mirror(
+    probe: &ProbeAsset,
+    camera: &Camera,
+    env: &EnvMap,
+    settings: RenderSettings,
+) -> (PrimaryHits, [Vec<f64>; 3]) {
+    render(
+        probe,
+        &Pose::IDENTITY,
+        camera,
+        env,
+        &Mirror,
+        settings,
+        &LightSampling::Bsdf,
+    )
+}
+
 fn sphere_camera(size: u32) -> Camera {
     Camera::new(size, size, 26.0, Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y).expect("a valid camera")
 }
@@ -169,15 +187,7 @@ fn a_mirror_sphere_reflects_the_env_map_including_poles_and_seam() {
     .build();
     let camera = sphere_camera(64);
     let settings = RenderSettings { spp: 4, seed: 1 };
-    let (hits, rgb) = render(
-        &probe,
-        &Pose::IDENTITY,
-        &camera,
-        &env,
-        &Mirror,
-        settings,
-        &LightSampling::Bsdf,
-    );
+    let (hits, rgb) = render_mirror(&probe, &camera, &env, settings);
     // Reference: the same sample rays against the same mesh (its
     // interpolated normals), reflected, looked up with the scalar lookup of
     // FORMATS.md's mapping: only the direction convention can differ.
@@ -649,15 +659,7 @@ fn the_probe_shadows_itself() {
     let (probe, camera) = floor_under_roof();
     let env = EnvMap::new(8, 4, vec![[1.0; 3]; 32]).expect("a constant map");
     let settings = RenderSettings { spp: 4, seed: 3 };
-    let (hits, rgb) = render(
-        &probe,
-        &Pose::IDENTITY,
-        &camera,
-        &env,
-        &Mirror,
-        settings,
-        &LightSampling::Bsdf,
-    );
+    let (hits, rgb) = render_mirror(&probe, &camera, &env, settings);
     // Each floor sample reflects about +Y; its light is 1 unless the
     // reflected ray meets the roof (y = 0.5, -1 < x < 0, -1 < z < 1).
     let mut want = vec![0.0f64; hits.pixels.len()];
