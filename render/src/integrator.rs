@@ -96,7 +96,7 @@ pub struct Occluder {
 }
 
 /// Shadow rays start this fraction of the probe's bounding-box diagonal
-/// from their point (0.1 mm on a 12-cm can): far above f32 rounding at
+/// from their point (0.15 mm on the 12-cm can): far above f32 rounding at
 /// world coordinates of a metre, far below any feature of a probe.
 const SHADOW_OFFSET: f32 = 1e-3;
 

@@ -740,15 +740,15 @@ fn fit_lighting(
 /// Pixels on an edge of the probe's reflectance (its albedo or roughness
 /// changes between the pixel and a 4-neighbour: their directional
 /// albedos, their samples' summed throughputs over their `lit` fractions
-/// (the probe's shadow taken out), differ by more than [`EDGE_CONTRAST`]): a pose off by a fraction
-/// of a pixel puts the photo's edge elsewhere, and the output map would
-/// take the probe's colours in (a label's red in the sky). An edge of a
-/// shadow is none: it moves with the pose smoothly, as the shading does.
-/// (Counted as edges, the pixels along the probe's own shadows were left
-/// out, and with them the sky only they see: the suite's tilted courtyard
-/// can, path-traced by Mitsuba, at its true pose scored 6.93 / 6.06 / 8.50
-/// deg mirror / shiny / diffuse, against 6.46 / 0.99 / 0.99.) `row` maps
-/// image pixels to `hits.pixels`.
+/// (the probe's shadow taken out), differ by more than [`EDGE_CONTRAST`]):
+/// a pose off by a fraction of a pixel puts the photo's edge elsewhere, and
+/// the output map would take the probe's colours in (a label's red in the
+/// sky). An edge of a shadow is none: it moves with the pose smoothly, as
+/// the shading does. (Counted as edges, the pixels along the probe's own
+/// shadows were left out, and with them the sky only they see: the suite's
+/// tilted courtyard can, path-traced by Mitsuba, at its true pose scored
+/// 6.93 / 6.06 / 8.50 deg mirror / shiny / diffuse, against 6.46 / 0.99 /
+/// 0.99.) `row` maps image pixels to `hits.pixels`.
 fn albedo_edges(
     hits: &PrimaryHits,
     row: &[u32],
