@@ -26,43 +26,37 @@ fn main() {
         ..
     } = demo::scene();
     let photo = Photo::new(photo, mask, camera).expect("a valid photo");
-    for threads in [1, 2] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .expect("pool");
-        pool.install(|| {
-            for spp in [32, 128] {
-                eprintln!("lighting_solve spp={spp} threads={threads}");
-                let mut settings = Settings::new(Quality::Default);
-                settings.spp_final = spp;
-                settings.known_pose = Some(pose);
-                let mut times = Vec::new();
-                let mut last = None;
-                for _ in 0..=RUNS {
-                    let t0 = Instant::now();
-                    let result = estimate(&photo, &probe, &settings).expect("an estimate");
-                    times.push(t0.elapsed().as_secs_f64());
-                    last = Some(result.report);
-                }
-                let report = last.expect("at least one run");
-                let warm = &mut times[1..];
-                warm.sort_by(f64::total_cmp);
-                let phase = report.phases.last().expect("the final solve's phase");
-                println!(
-                    "{}",
-                    json!({
-                        "bench": "lighting_solve", "impl": "transport_lbfgs", "mode": "known_pose",
-                        "spp": report.final_spp, "threads": threads,
-                        "median_s": warm[warm.len() / 2], "min_s": warm[0], "runs": warm.len(),
-                        "check": {
-                            "psnr_db": report.psnr_db, "evaluations": phase.evaluations,
-                            "working_resolution": report.working_resolution,
-                            "pixels": photo.mask.count(),
-                        }
-                    })
-                );
+    demo::on_1_and_2_threads(|threads| {
+        for spp in [32, 128] {
+            eprintln!("lighting_solve spp={spp} threads={threads}");
+            let mut settings = Settings::new(Quality::Default);
+            settings.spp_final = spp;
+            settings.known_pose = Some(pose);
+            let mut times = Vec::new();
+            let mut last = None;
+            for _ in 0..=RUNS {
+                let t0 = Instant::now();
+                let result = estimate(&photo, &probe, &settings).expect("an estimate");
+                times.push(t0.elapsed().as_secs_f64());
+                last = Some(result.report);
             }
-        });
-    }
+            let report = last.expect("at least one run");
+            let warm = &mut times[1..];
+            warm.sort_by(f64::total_cmp);
+            let phase = report.phases.last().expect("the final solve's phase");
+            println!(
+                "{}",
+                json!({
+                    "bench": "lighting_solve", "impl": "transport_lbfgs", "mode": "known_pose",
+                    "spp": report.final_spp, "threads": threads,
+                    "median_s": warm[warm.len() / 2], "min_s": warm[0], "runs": warm.len(),
+                    "check": {
+                        "psnr_db": report.psnr_db, "evaluations": phase.evaluations,
+                        "working_resolution": report.working_resolution,
+                        "pixels": photo.mask.count(),
+                    }
+                })
+            );
+        }
+    });
 }

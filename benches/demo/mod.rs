@@ -49,3 +49,15 @@ pub fn scene() -> Demo {
         mask,
     }
 }
+
+/// Runs `bench(threads)` inside a pool of 1, then 2 threads: the machine's
+/// cores, and the speed-up they give.
+pub fn on_1_and_2_threads(bench: impl Fn(usize) + Sync) {
+    for threads in [1, 2] {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool")
+            .install(|| bench(threads));
+    }
+}
