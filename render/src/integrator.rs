@@ -8,8 +8,11 @@
 //! ([`LightSampling`]), times the soft visibility texture v, averaged into
 //! pixels. V is 0 where the probe itself blocks the light (a shadow ray
 //! against its mesh): a concave probe's recesses (a can's lid, a cap's
-//! inside) do not see the sky above them. Inter-reflections are left out;
-//! v stands in for them where a probe asset fits it.
+//! inside) do not see the sky above them. What they see instead, the probe
+//! itself, can be followed by one bounce
+//! ([`LightSampling::interreflection`]): the shadowed BRDF sample goes on
+//! from the point it hits with a BRDF sample there. Further bounces are
+//! left out.
 //!
 //! Two steps: [`PrimaryHits::trace`] finds which triangle each sub-pixel
 //! sample sees (a BVH, not differentiated); [`shade`] recomputes the hit
@@ -113,6 +116,34 @@ impl Occluder {
     pub fn lit(&self, point: Vec3, direction: Vec3) -> bool {
         !self.accel.occluded(point, direction, self.t_min, f32::INFINITY)
     }
+
+    /// The triangle that blocks light from `direction` (world, unit) at
+    /// `point` on the probe (the nearest), if any.
+    pub fn blocker(&self, point: Vec3, direction: Vec3) -> Option<u32> {
+        self.accel
+            .closest_hit(point + self.t_min * direction, direction, f32::INFINITY)
+            .map(|hit| hit.triangle)
+    }
+
+    /// Per point, 1 where light from its direction in `directions` (world,
+    /// unit; x, y, z arrays aligned with `points`) reaches it, 0 where the
+    /// probe blocks it.
+    pub fn unshadowed<T: Real>(&self, points: &[Vec3], directions: &[Vec<T>; 3]) -> Vec<T> {
+        assert!(
+            directions.iter().all(|d| d.len() == points.len()),
+            "Occluder::unshadowed: one direction per point"
+        );
+        (0..points.len())
+            .into_par_iter()
+            .map(|i| {
+                let d = directions.each_ref().map(|d| d[i].to_f32().unwrap_or(f32::NAN));
+                match self.lit(points[i], Vec3::from_array(d)) {
+                    true => T::one(),
+                    false => T::zero(),
+                }
+            })
+            .collect()
+    }
 }
 
 /// Start of the random number streams of the BRDF samples (plus the pixel
@@ -120,6 +151,8 @@ impl Occluder {
 const BSDF_STREAM: u64 = 1 << 40;
 /// Start of the random number streams of the env-map samples (plus the pixel index).
 const LIGHT_STREAM: u64 = 2 << 40;
+/// Start of the random number streams of the bounces' BRDF samples (plus the pixel index).
+const BOUNCE_STREAM: u64 = 3 << 40;
 
 impl PrimaryHits {
     /// Traces `spp` stratified rays through every pixel of the probe's
@@ -266,30 +299,6 @@ impl PrimaryHits {
         hits
     }
 
-    /// Per hit sample, 1 where light from its direction in `directions`
-    /// (world, unit; x, y, z arrays aligned with the hit samples) reaches
-    /// its point, 0 where the probe blocks it.
-    pub fn unshadowed<T: Real>(&self, directions: [&[T]; 3]) -> Vec<T> {
-        let occluder = self
-            .occluder
-            .as_ref()
-            .expect("PrimaryHits::unshadowed: hits made by trace");
-        assert!(
-            directions.iter().all(|d| d.len() == self.point.len()),
-            "PrimaryHits::unshadowed: one direction per hit sample"
-        );
-        (0..self.point.len())
-            .into_par_iter()
-            .map(|i| {
-                let d = directions.map(|d| d[i].to_f32().unwrap_or(f32::NAN));
-                match occluder.lit(self.point[i], Vec3::from_array(d)) {
-                    true => T::one(),
-                    false => T::zero(),
-                }
-            })
-            .collect()
-    }
-
     /// Number of hit samples.
     pub fn len(&self) -> usize {
         self.segment.len()
@@ -373,6 +382,115 @@ fn gather3<'t, T: Real>(field: Vec3Var<'t, T>, idx: Var<'t, T>) -> Vec3Var<'t, T
     Vec3Var::new(field.x.gather(idx), field.y.gather(idx), field.z.gather(idx))
 }
 
+/// `values` at the samples `idx`: a per-sample array gathered, a broadcast
+/// scalar (a constant texture's value, say) as it is.
+fn at_samples<'t, T: Real>(values: Var<'t, T>, idx: Var<'t, T>) -> Var<'t, T> {
+    match values.len() {
+        1 => values,
+        _ => values.gather(idx),
+    }
+}
+
+/// Where rays meet the (moving) triangles a BVH found them to hit: the
+/// barycentrics by Moller-Trumbore on the tape, so that whatever is
+/// interpolated on the triangle follows the pose.
+#[derive(Clone, Copy)]
+struct SurfaceHit<'t, T: Real> {
+    /// The vertex indices of each hit's triangle.
+    corners: [Var<'t, T>; 3],
+    /// The weights of corners 1 and 2.
+    b1: Var<'t, T>,
+    b2: Var<'t, T>,
+}
+
+impl<'t, T: Real> SurfaceHit<'t, T> {
+    /// The rays `origin + t direction` against the triangles `corners` of `positions`.
+    fn find(
+        origin: Vec3Var<'t, T>,
+        direction: Vec3Var<'t, T>,
+        corners: [Var<'t, T>; 3],
+        positions: Vec3Var<'t, T>,
+    ) -> Self {
+        let [p0, p1, p2] = corners.map(|c| gather3(positions, c));
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let pvec = direction.cross(e2);
+        let inv_det = e1.dot(pvec).recip_var();
+        let tvec = origin - p0;
+        let qvec = tvec.cross(e1);
+        SurfaceHit {
+            corners,
+            b1: tvec.dot(pvec) * inv_det,
+            b2: direction.dot(qvec) * inv_det,
+        }
+    }
+
+    /// A per-vertex quantity at the hits.
+    fn interpolate(&self, field: Var<'t, T>) -> Var<'t, T> {
+        let [f0, f1, f2] = self.corners.map(|c| field.gather(c));
+        (f1 - f0).mul_add(self.b1, (f2 - f0).mul_add(self.b2, f0))
+    }
+
+    fn interpolate3(&self, field: Vec3Var<'t, T>) -> Vec3Var<'t, T> {
+        Vec3Var::new(
+            self.interpolate(field.x),
+            self.interpolate(field.y),
+            self.interpolate(field.z),
+        )
+    }
+
+    /// The hits `idx`.
+    fn subset(&self, idx: Var<'t, T>) -> Self {
+        SurfaceHit {
+            corners: self.corners.map(|c| c.gather(idx)),
+            b1: self.b1.gather(idx),
+            b2: self.b2.gather(idx),
+        }
+    }
+}
+
+/// The probe at surface hits seen from `wo_world`: the local frame of the
+/// interpolated normal (see [`frame`]), the material and the soft visibility.
+struct Shading<'t, T: Real> {
+    frame: [Vec3Var<'t, T>; 3],
+    /// The view direction, local frame.
+    wo: Vec3Var<'t, T>,
+    surface: Surface<'t, T>,
+    visibility: Var<'t, T>,
+}
+
+impl<'t, T: Real> Shading<'t, T> {
+    fn at(
+        hit: &SurfaceHit<'t, T>,
+        wo_world: Vec3Var<'t, T>,
+        probe: &ProbeVars<'t, T>,
+        posed: &PosedMesh<'t, T>,
+    ) -> Self {
+        let n = hit.interpolate3(posed.normals).normalize(T::c(1e-12));
+        let [u, v] = posed.uv.map(|uv| hit.interpolate(uv));
+        let (s, t) = frame(n, wo_world);
+        let frame = [s, t, n];
+        Shading {
+            frame,
+            wo: Vec3Var::new(s.dot(wo_world), t.dot(wo_world), n.dot(wo_world)),
+            surface: Surface {
+                albedo: probe.albedo.lookup(u, v),
+                roughness: probe.roughness.lookup(u, v)[0],
+            },
+            visibility: probe.visibility.lookup(u, v)[0],
+        }
+    }
+
+    fn to_local(&self, w: Vec3Var<'t, T>) -> Vec3Var<'t, T> {
+        let [s, t, n] = self.frame;
+        Vec3Var::new(s.dot(w), t.dot(w), n.dot(w))
+    }
+
+    fn to_world(&self, w: Vec3Var<'t, T>) -> Vec3Var<'t, T> {
+        let [s, t, n] = self.frame;
+        s.scale(w.x) + t.scale(w.y) + n.scale(w.z)
+    }
+}
+
 /// The shading frame (s, t, n) around unit normals `n`, with s along the
 /// view direction's tangential part. The GGX lobe is isotropic, so any frame
 /// gives the same integral; this one is smooth in `n` everywhere except
@@ -422,7 +540,8 @@ impl<'t, T: Real> Recip for Var<'t, T> {
 pub struct LightSamples<'t, T: Real> {
     /// World direction of the sample (towards the light).
     pub wi: Vec3Var<'t, T>,
-    /// `shadow * visibility * f cos / pdf * (MIS weight) / (the pixel's samples)`, RGB.
+    /// `shadow * visibility * f cos / pdf * (MIS weight) / (the pixel's samples)`, RGB
+    /// (after a bounce: the product of both samples' factors).
     pub throughput: [Var<'t, T>; 3],
     /// The shadow test: 1 where the light reaches the sample's point, 0
     /// where the probe blocks it (a constant).
@@ -431,6 +550,11 @@ pub struct LightSamples<'t, T: Real> {
     pub segment: Var<'t, T>,
     /// Number of pixels (segments).
     pub pixels: usize,
+    /// The first `direct` samples light the probe's visible points
+    /// directly (the BRDF samples, one per hit, in the hits' order; then
+    /// the env-map samples, with MIS); the rest after one bounce off the
+    /// probe ([`LightSampling::interreflection`]).
+    pub direct: usize,
 }
 
 impl<'t, T: Real> LightSamples<'t, T> {
@@ -439,24 +563,71 @@ impl<'t, T: Real> LightSamples<'t, T> {
         let l = env.env_radiance(self.wi);
         std::array::from_fn(|c| (self.throughput[c] * l[c]).segmented_sum(self.segment, self.pixels))
     }
+
+    /// These samples, then `more` (of the same pixels), as one set; `direct` is the caller's.
+    fn followed_by(self, more: Self) -> Self {
+        let tape = self.lit.tape();
+        let both = |a: Var<'t, T>, b: Var<'t, T>| tape.concat(&[a, b]);
+        LightSamples {
+            wi: Vec3Var::new(
+                both(self.wi.x, more.wi.x),
+                both(self.wi.y, more.wi.y),
+                both(self.wi.z, more.wi.z),
+            ),
+            throughput: std::array::from_fn(|c| both(self.throughput[c], more.throughput[c])),
+            lit: both(self.lit, more.lit),
+            segment: both(self.segment, more.segment),
+            ..self
+        }
+    }
 }
 
 /// How [`light_samples_with`] picks the directions light arrives from.
 #[derive(Clone, Copy, Debug)]
-pub enum LightSampling<'a> {
-    /// One BRDF sample per hit: the paper's estimator.
-    Bsdf,
-    /// One BRDF sample and one sample of the env map's luminance per hit,
-    /// each weighted by the balance heuristic (Veach 1997, section 9.2.2):
-    /// far less noise under small bright sources, which the BRDF's lobe
-    /// rarely finds. The sampler must stay fixed while gradients are taken
-    /// (it is built from a map, not differentiated).
-    Mis(&'a EnvSampler),
+pub struct LightSampling<'a> {
+    /// With a sampler of the env map: one BRDF sample and one sample of
+    /// the env map's luminance per hit, each weighted by the balance
+    /// heuristic (Veach 1997, section 9.2.2): far less noise under small
+    /// bright sources, which the BRDF's lobe rarely finds. The sampler
+    /// must stay fixed while gradients are taken (it is built from a map,
+    /// not differentiated). Without: one BRDF sample per hit, the paper's
+    /// estimator.
+    pub env: Option<&'a EnvSampler>,
+    /// Whether a BRDF sample that the probe shadows goes on from the point
+    /// of the probe it hits (one more BRDF sample there, itself shadowed):
+    /// the light the probe reflects onto itself, which a concave probe's
+    /// recesses see where they do not see the sky (a can's lid under its
+    /// rim). Without, the model is direct lighting only.
+    pub interreflection: bool,
+}
+
+impl<'a> LightSampling<'a> {
+    /// One BRDF sample per hit, direct lighting.
+    pub const BSDF: Self = LightSampling {
+        env: None,
+        interreflection: false,
+    };
+
+    /// A BRDF and an env-map sample per hit by MIS, direct lighting.
+    pub fn mis(sampler: &'a EnvSampler) -> Self {
+        LightSampling {
+            env: Some(sampler),
+            interreflection: false,
+        }
+    }
+
+    /// The same with one bounce off the probe.
+    pub fn with_interreflection(self) -> Self {
+        LightSampling {
+            interreflection: true,
+            ..self
+        }
+    }
 }
 
 /// The light samples of every hit: the hit point on the (moving) triangle,
 /// its material, one BRDF sample (same as [`light_samples_with`] and
-/// [`LightSampling::Bsdf`]).
+/// [`LightSampling::BSDF`]).
 pub fn light_samples<'t, T: Real>(
     tape: &'t Tape<T>,
     hits: &PrimaryHits,
@@ -466,11 +637,12 @@ pub fn light_samples<'t, T: Real>(
     triangles: &[[u32; 3]],
     bsdf: &dyn Bsdf<T>,
 ) -> LightSamples<'t, T> {
-    light_samples_with(tape, hits, camera, probe, posed, triangles, bsdf, &LightSampling::Bsdf)
+    light_samples_with(tape, hits, camera, probe, posed, triangles, bsdf, &LightSampling::BSDF)
 }
 
 /// The light samples of every hit, picked by `sampling`: the BRDF sample's
-/// first, then (MIS) the env-map sample's, with the same segments.
+/// first, then (MIS) the env-map sample's, with the same segments, then
+/// (interreflection) the bounces.
 ///
 /// With MIS, the BRDF sample at `wi_b` (a smooth function of the pose, the
 /// roughness and its random numbers) carries `f cos / p_b * p_b / (p_b + p_e)`
@@ -494,100 +666,191 @@ pub fn light_samples_with<'t, T: Real>(
     sampling: &LightSampling,
 ) -> LightSamples<'t, T> {
     assert!(!hits.is_empty(), "light_samples: no sample sees the probe");
+    let occluder = hits
+        .occluder
+        .as_deref()
+        .expect("light_samples: hits made by PrimaryHits::trace");
     let s = SampleVars::new(tape, hits, triangles);
     let origin = Vec3Var::constant(
         tape,
         [camera.origin.x, camera.origin.y, camera.origin.z].map(|c| T::c(c as f64)),
     );
-    // The hit point on the (moving) triangle along the (fixed) ray: Moller-Trumbore.
-    let [p0, p1, p2] = s.corners.map(|c| gather3(posed.positions, c));
-    let (e1, e2) = (p1 - p0, p2 - p0);
-    let pvec = s.direction.cross(e2);
-    let inv_det = e1.dot(pvec).recip_var();
-    let tvec = origin - p0;
-    let b1 = tvec.dot(pvec) * inv_det;
-    let qvec = tvec.cross(e1);
-    let b2 = s.direction.dot(qvec) * inv_det;
-    let interpolate = |f: [Var<'t, T>; 3]| (f[1] - f[0]).mul_add(b1, (f[2] - f[0]).mul_add(b2, f[0]));
-    let [n0, n1, n2] = s.corners.map(|c| gather3(posed.normals, c));
-    let n = Vec3Var::new(
-        interpolate([n0.x, n1.x, n2.x]),
-        interpolate([n0.y, n1.y, n2.y]),
-        interpolate([n0.z, n1.z, n2.z]),
-    )
-    .normalize(T::c(1e-12));
-    let [u, v] = posed.uv.map(|uv| interpolate(s.corners.map(|c| uv.gather(c))));
-    // Shading in the local frame of the interpolated normal.
-    let wo_world = -s.direction;
-    let (ts, tt) = frame(n, wo_world);
-    let to_local = |w: Vec3Var<'t, T>| Vec3Var::new(ts.dot(w), tt.dot(w), n.dot(w));
-    let wo = to_local(wo_world);
-    let surface = Surface {
-        albedo: probe.albedo.lookup(u, v),
-        roughness: probe.roughness.lookup(u, v)[0],
-    };
-    let visibility = probe.visibility.lookup(u, v)[0];
-    let scale = visibility * s.pixel_share;
-    let sample = bsdf.sample(&surface, wo, s.random);
-    let wi = ts.scale(sample.wi.x) + tt.scale(sample.wi.y) + n.scale(sample.wi.z);
-    let unshadowed = |w: Vec3Var<'t, T>| {
-        let d = [w.x, w.y, w.z].map(|c| tape.to_vec(c));
-        tape.constant(&hits.unshadowed([&d[0], &d[1], &d[2]]))
-    };
+    // The hit point on the (moving) triangle along the (fixed) ray.
+    let hit = SurfaceHit::find(origin, s.direction, s.corners, posed.positions);
+    let shading = Shading::at(&hit, -s.direction, probe, posed);
+    let scale = shading.visibility * s.pixel_share;
+    let sample = bsdf.sample(&shading.surface, shading.wo, s.random);
+    let wi = shading.to_world(sample.wi);
+    let unshadowed = |w: Vec3Var<'t, T>| tape.constant(&occluder.unshadowed(&hits.point, &values(w)));
     let lit = unshadowed(wi);
-    let scale_bsdf = scale * lit;
-    let LightSampling::Mis(sampler) = sampling else {
-        return LightSamples {
-            wi,
-            throughput: sample.weight.map(|w| w * scale_bsdf),
-            lit,
-            segment: s.segment,
-            pixels: hits.pixels.len(),
-        };
-    };
-    let (zero, one) = (tape.scalar(T::zero()), tape.scalar(T::one()));
-    // The BRDF sample's weight p_b / (p_b + p_e). A lobe that gives its own
-    // sample pdf 0 is a Dirac one (a mirror, GGX at r = 0), which no other
-    // strategy reaches: weight 1.
-    let p_bsdf = bsdf.pdf(&surface, wo, sample.wi);
-    let lobe = p_bsdf.gt(zero);
-    let p_env = EnvPdfVars::new(tape, sampler).pdf(wi);
-    let w_bsdf = lobe.select(p_bsdf / lobe.select(p_bsdf + p_env, one), one);
-    let bsdf_scale = scale_bsdf * w_bsdf;
-    // The env sample: f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q)
-    // with q = 1 / p_e, which is 0 on a pole (p_e infinite there).
-    // Each pixel's stream gives its hit samples one pair of numbers each, in order.
-    let pixel_runs: Vec<&[u32]> = hits.segment.chunk_by(|a, b| a == b).collect();
-    let lights: Vec<_> = pixel_runs
-        .par_iter()
-        .flat_map_iter(|run| {
-            let pixel = hits.pixels[run[0] as usize] as u64;
-            let mut rng = Rng::new(hits.seed, LIGHT_STREAM + pixel);
-            run.iter().map(move |_| sampler.sample(rng.next_2d()))
-        })
-        .collect();
-    let constant = |f: &dyn Fn(&crate::sampling::EnvSample) -> f32| {
-        tape.constant(&lights.iter().map(|l| T::c(f(l) as f64)).collect::<Vec<T>>())
-    };
-    let wi_env = Vec3Var::new(
-        constant(&|l| l.direction.x),
-        constant(&|l| l.direction.y),
-        constant(&|l| l.direction.z),
-    );
-    let q = constant(&|l| 1.0 / l.pdf);
-    let wi_env_local = to_local(wi_env);
-    let f_cos = bsdf.eval(&surface, wo, wi_env_local);
-    let p_bsdf_env = bsdf.pdf(&surface, wo, wi_env_local);
-    let lit_env = unshadowed(wi_env);
-    let env_scale = scale * lit_env * q / p_bsdf_env.mul_add(q, one);
-    let both = |a: Var<'t, T>, b: Var<'t, T>| tape.concat(&[a, b]);
-    LightSamples {
-        wi: Vec3Var::new(both(wi.x, wi_env.x), both(wi.y, wi_env.y), both(wi.z, wi_env.z)),
-        throughput: std::array::from_fn(|c| both(sample.weight[c] * bsdf_scale, f_cos[c] * env_scale)),
-        lit: both(lit, lit_env),
-        segment: both(s.segment, s.segment),
+    // The BRDF sample's throughput before its shadow and MIS weight.
+    let weight = sample.weight.map(|w| w * scale);
+    let bsdf_samples = |mis_weight: Option<Var<'t, T>>| LightSamples {
+        wi,
+        throughput: weight.map(|w| match mis_weight {
+            Some(m) => w * lit * m,
+            None => w * lit,
+        }),
+        lit,
+        segment: s.segment,
         pixels: hits.pixels.len(),
+        direct: hits.len(),
+    };
+    let direct = match sampling.env {
+        None => bsdf_samples(None),
+        Some(sampler) => {
+            let (zero, one) = (tape.scalar(T::zero()), tape.scalar(T::one()));
+            // The BRDF sample's weight p_b / (p_b + p_e). A lobe that gives its own
+            // sample pdf 0 is a Dirac one (a mirror, GGX at r = 0), which no other
+            // strategy reaches: weight 1.
+            let p_bsdf = bsdf.pdf(&shading.surface, shading.wo, sample.wi);
+            let lobe = p_bsdf.gt(zero);
+            let p_env = EnvPdfVars::new(tape, sampler).pdf(wi);
+            let w_bsdf = lobe.select(p_bsdf / lobe.select(p_bsdf + p_env, one), one);
+            // The env sample: f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q)
+            // with q = 1 / p_e, which is 0 on a pole (p_e infinite there).
+            let lights = per_pixel_draws(hits, (0..hits.len()).collect(), LIGHT_STREAM, |rng| {
+                sampler.sample(rng.next_2d())
+            });
+            let constant = |f: &dyn Fn(&crate::sampling::EnvSample) -> f32| {
+                tape.constant(&lights.iter().map(|l| T::c(f(l) as f64)).collect::<Vec<T>>())
+            };
+            let wi_env = Vec3Var::new(
+                constant(&|l| l.direction.x),
+                constant(&|l| l.direction.y),
+                constant(&|l| l.direction.z),
+            );
+            let q = constant(&|l| 1.0 / l.pdf);
+            let wi_env_local = shading.to_local(wi_env);
+            let f_cos = bsdf.eval(&shading.surface, shading.wo, wi_env_local);
+            let p_bsdf_env = bsdf.pdf(&shading.surface, shading.wo, wi_env_local);
+            let lit_env = unshadowed(wi_env);
+            let env_scale = scale * lit_env * q / p_bsdf_env.mul_add(q, one);
+            let env_samples = LightSamples {
+                wi: wi_env,
+                throughput: f_cos.map(|f| f * env_scale),
+                lit: lit_env,
+                segment: s.segment,
+                pixels: hits.pixels.len(),
+                direct: hits.len(),
+            };
+            LightSamples {
+                direct: 2 * hits.len(),
+                ..bsdf_samples(Some(w_bsdf)).followed_by(env_samples)
+            }
+        }
+    };
+    if !sampling.interreflection {
+        return direct;
     }
+    let first = FirstBounce {
+        hit,
+        wi,
+        weight,
+        lit,
+        segment: s.segment,
+    };
+    match bounce(tape, hits, occluder, probe, posed, triangles, bsdf, &first) {
+        Some(bounced) => direct.followed_by(bounced),
+        None => direct,
+    }
+}
+
+/// The x, y, z values of a vector array.
+fn values<T: Real>(w: Vec3Var<'_, T>) -> [Vec<T>; 3] {
+    let tape = w.x.tape();
+    [w.x, w.y, w.z].map(|c| tape.to_vec(c))
+}
+
+/// One draw per listed hit sample (`samples`, in order) from its pixel's
+/// random number stream `stream + pixel`, the pixel's samples in order: the
+/// same whatever the thread count.
+fn per_pixel_draws<D: Send>(
+    hits: &PrimaryHits,
+    samples: Vec<usize>,
+    stream: u64,
+    draw: impl Fn(&mut Rng) -> D + Sync,
+) -> Vec<D> {
+    let runs: Vec<&[usize]> = samples.chunk_by(|&a, &b| hits.segment[a] == hits.segment[b]).collect();
+    runs.par_iter()
+        .flat_map_iter(|run| {
+            let pixel = hits.pixels[hits.segment[run[0]] as usize] as u64;
+            let mut rng = Rng::new(hits.seed, stream + pixel);
+            run.iter().map(|_| draw(&mut rng)).collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// The BRDF samples of the hits, what a bounce goes on from.
+struct FirstBounce<'t, T: Real> {
+    hit: SurfaceHit<'t, T>,
+    wi: Vec3Var<'t, T>,
+    /// Throughput before the shadow test and any MIS weight, RGB.
+    weight: [Var<'t, T>; 3],
+    lit: Var<'t, T>,
+    segment: Var<'t, T>,
+}
+
+/// The BRDF samples of `first` that the probe shadows, gone on from the
+/// point of the probe each one hits: one BRDF sample of that point's
+/// material reads the env map, shadowed in turn (a second bounce is left
+/// out). Its throughput is the product of both samples': the first's
+/// without an MIS weight, since no env-map sample reaches the light the
+/// probe reflects. Differentiable as the first samples are (the second
+/// hit point moves with the pose along the first sample's moving ray).
+/// `None` when nothing is shadowed.
+#[allow(clippy::too_many_arguments)]
+fn bounce<'t, T: Real>(
+    tape: &'t Tape<T>,
+    hits: &PrimaryHits,
+    occluder: &Occluder,
+    probe: &ProbeVars<'t, T>,
+    posed: &PosedMesh<'t, T>,
+    triangles: &[[u32; 3]],
+    bsdf: &dyn Bsdf<T>,
+    first: &FirstBounce<'t, T>,
+) -> Option<LightSamples<'t, T>> {
+    let lit = tape.to_vec(first.lit);
+    let d = values(first.wi);
+    let direction = |i: usize| Vec3::from_array(d.each_ref().map(|d| d[i].to_f32().unwrap_or(f32::NAN)));
+    let blocked: Vec<(usize, u32)> = (0..hits.len())
+        .into_par_iter()
+        .filter(|&i| lit[i] == T::zero())
+        .filter_map(|i| occluder.blocker(hits.point[i], direction(i)).map(|t| (i, t)))
+        .collect();
+    if blocked.is_empty() {
+        return None;
+    }
+    let constant =
+        |f: &dyn Fn(&(usize, u32)) -> f64| tape.constant(&blocked.iter().map(|b| T::c(f(b))).collect::<Vec<T>>());
+    let idx = constant(&|&(i, _)| i as f64);
+    let corners = [0, 1, 2].map(|k| constant(&|&(_, t)| triangles[t as usize][k] as f64));
+    let ray = gather3(first.wi, idx);
+    let origin = first.hit.subset(idx).interpolate3(posed.positions);
+    let hit = SurfaceHit::find(origin, ray, corners, posed.positions);
+    let shading = Shading::at(&hit, -ray, probe, posed);
+    let random = per_pixel_draws(hits, blocked.iter().map(|b| b.0).collect(), BOUNCE_STREAM, |rng| {
+        rng.next_2d()
+    });
+    let random = [0, 1].map(|k| tape.constant(&random.iter().map(|r| T::c(r[k] as f64)).collect::<Vec<T>>()));
+    let sample = bsdf.sample(&shading.surface, shading.wo, random);
+    let wi = shading.to_world(sample.wi);
+    let points: Vec<Vec3> = {
+        let p = values(hit.interpolate3(posed.positions));
+        (0..blocked.len())
+            .map(|i| Vec3::from_array(p.each_ref().map(|p| p[i].to_f32().unwrap_or(f32::NAN))))
+            .collect()
+    };
+    let lit = tape.constant(&occluder.unshadowed(&points, &values(wi)));
+    let scale = shading.visibility * lit;
+    Some(LightSamples {
+        wi,
+        throughput: std::array::from_fn(|c| at_samples(first.weight[c], idx) * sample.weight[c] * scale),
+        lit,
+        segment: first.segment.gather(idx),
+        pixels: hits.pixels.len(),
+        direct: 0,
+    })
 }
 
 /// Renders the probe's radiance into the pixels of `hits`: one array per
@@ -619,7 +882,8 @@ const SILHOUETTE_SPP_FACTOR: u32 = 4;
 /// Renders the probe at `pose` under `env` (f32, no gradients): the image
 /// (black background) and the hard coverage mask (at least half of a pixel's
 /// samples see the probe). Light is sampled by MIS of the BRDF and the env
-/// map ([`LightSampling::Mis`]); silhouette pixels get
+/// map ([`LightSampling::mis`]), and what the probe reflects onto itself
+/// by one bounce ([`LightSampling::interreflection`]); silhouette pixels get
 /// [`SILHOUETTE_SPP_FACTOR`] times the samples ([`PrimaryHits::trace_refined`]).
 /// High sample counts run in passes of at most 16 spp (seeds `seed`,
 /// `seed + 2^32`, ...), averaged, so memory stays bounded.
@@ -670,7 +934,7 @@ pub fn render_image(
             &posed,
             &probe.mesh.triangles,
             bsdf,
-            &LightSampling::Mis(&sampler),
+            &LightSampling::mis(&sampler).with_interreflection(),
         )
         .radiance(&env_vars);
         let rgb = rgb.map(|c| tape.to_vec(c));
