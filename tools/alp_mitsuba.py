@@ -314,12 +314,14 @@ def scene_dict(mi, probe, pose, cam, env, spp, integrator, crop=None, seed=0, fo
     }
 
 
-def make_direct_integrator(mi, albedo_texture=None, visibility_texture=None):
+def make_direct_integrator(mi, albedo_texture=None, visibility_texture=None, bounce=True):
     """Our forward model as a Mitsuba integrator: at the first hit, direct lighting from the
-    environment with shadow rays (the probe shadows itself; no inter-reflection), times the
-    visibility texture; primary rays that miss are black. Estimator: one emitter sample + one
-    BSDF sample combined by MIS (balance heuristic); it converges to the same integral as our
-    BSDF-only estimator.
+    environment with shadow rays (the probe shadows itself), and with `bounce` (our
+    `render_image`) one bounce of inter-reflection: a BSDF sample the probe blocks goes on from
+    the point it hits with one BSDF sample there, shadowed in turn (no MIS weight on the first:
+    no emitter sample reaches that light); times the visibility texture at each hit; primary
+    rays that miss are black. Estimator: one emitter sample + one BSDF sample combined by MIS
+    (balance heuristic); it converges to the same integral as our BSDF-only estimator.
 
     With `albedo_texture` the scene's BSDF must have specular_reflectance 1 (`material: none`,
     i.e. F = 1) and this integrator multiplies each sample by Schlick's
@@ -337,6 +339,7 @@ def make_direct_integrator(mi, albedo_texture=None, visibility_texture=None):
             super().__init__(props)
             self.albedo = albedo_texture
             self.vis = visibility_texture
+            self.bounce = bounce
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
             si = scene.ray_intersect(ray, active)
@@ -362,6 +365,8 @@ def make_direct_integrator(mi, albedo_texture=None, visibility_texture=None):
             bs, bweight = bsdf.sample(ctx, si, sampler.next_1d(valid), sampler.next_2d(valid), valid)
             d = si.to_world(bs.wo)
             lit = valid & ~scene.ray_test(si.spawn_ray(d), valid)
+            if a is not None:
+                bweight *= schlick(a, si.wi, bs.wo)
             sie = dr.zeros(mi.SurfaceInteraction3f)
             sie.wi = -d
             sie.wavelengths = si.wavelengths
@@ -372,9 +377,27 @@ def make_direct_integrator(mi, albedo_texture=None, visibility_texture=None):
             delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
             w_bs = dr.select(delta, 1.0, bs.pdf / (bs.pdf + epdf))
             c_bs = bweight * le * w_bs
-            if a is not None:
-                c_bs *= schlick(a, si.wi, bs.wo)
             result += dr.select(lit & (bs.pdf > 0), c_bs, 0.0)
+
+            if self.bounce:
+                # The blocked BSDF sample goes on from the probe point it hits.
+                blocked = valid & ~lit & (bs.pdf > 0)
+                si2 = scene.ray_intersect(si.spawn_ray(d), blocked)
+                blocked &= si2.is_valid()
+                bsdf2 = si2.bsdf()
+                bs2, bweight2 = bsdf2.sample(ctx, si2, sampler.next_1d(blocked), sampler.next_2d(blocked),
+                                             blocked)
+                d2 = si2.to_world(bs2.wo)
+                lit2 = blocked & (bs2.pdf > 0) & ~scene.ray_test(si2.spawn_ray(d2), blocked)
+                sie2 = dr.zeros(mi.SurfaceInteraction3f)
+                sie2.wi = -d2
+                sie2.wavelengths = si.wavelengths
+                c_2 = bweight * bweight2 * env.eval(sie2, lit2)
+                if self.albedo is not None:
+                    c_2 *= schlick(self.albedo.eval(si2, lit2), si2.wi, bs2.wo)
+                if self.vis is not None:
+                    c_2 *= self.vis.eval_1(si2, lit2)
+                result += dr.select(lit2, c_2, 0.0)
 
             if self.vis is not None:
                 result *= self.vis.eval_1(si, valid)

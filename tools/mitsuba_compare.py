@@ -63,7 +63,7 @@ def render_mitsuba(mi, probe, pose, cam, env, spp, integrator_kind, crop, pass_s
             sys.exit("--fresnel schlick needs --integrator direct (Mitsuba's own integrators "
                      "only have the conductor Fresnel)")
         fold = True
-        integ_dict = {"type": "path", "max_depth": 2, "hide_emitters": True}
+        integ_dict = {"type": "path", "max_depth": 3, "hide_emitters": True}
     else:
         sys.exit("unknown integrator %r" % integrator_kind)
     scene = mi.load_dict(am.scene_dict(mi, probe, pose, cam, env, per_pass, integ_dict, crop,
