@@ -30,7 +30,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::{Accel, stratified_offsets};
-use crate::bsdf::{Bsdf, Surface};
+use crate::bsdf::{Bsdf, BsdfSample, Surface};
 use crate::camera::Camera;
 use crate::envmap::EnvMap;
 use crate::image_io::{Mask, RgbImage};
@@ -39,7 +39,7 @@ use crate::mesh::Mesh;
 use crate::pose::Pose;
 use crate::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use crate::probe::ProbeAsset;
-use crate::sampling::{EnvSampler, Rng, stratified_square};
+use crate::sampling::{EnvSample, EnvSampler, Rng, stratified_square};
 
 /// Monte Carlo settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -153,6 +153,8 @@ const BSDF_STREAM: u64 = 1 << 40;
 const LIGHT_STREAM: u64 = 2 << 40;
 /// Start of the random number streams of the bounces' BRDF samples (plus the pixel index).
 const BOUNCE_STREAM: u64 = 3 << 40;
+/// Start of the random number streams of the bounces' env-map samples (plus the pixel index).
+const BOUNCE_LIGHT_STREAM: u64 = 4 << 40;
 
 impl PrimaryHits {
     /// Traces `spp` stratified rays through every pixel of the probe's
@@ -594,7 +596,8 @@ pub struct LightSampling<'a> {
     /// estimator.
     pub env: Option<&'a EnvSampler>,
     /// Whether a BRDF sample that the probe shadows goes on from the point
-    /// of the probe it hits (one more BRDF sample there, itself shadowed):
+    /// of the probe it hits (one more BRDF sample there, and an env-map
+    /// sample with MIS, each itself shadowed):
     /// the light the probe reflects onto itself, which a concave probe's
     /// recesses see where they do not see the sky (a can's lid under its
     /// rim). Without, the model is direct lighting only.
@@ -699,36 +702,14 @@ pub fn light_samples_with<'t, T: Real>(
     let direct = match sampling.env {
         None => bsdf_samples(None),
         Some(sampler) => {
-            let (zero, one) = (tape.scalar(T::zero()), tape.scalar(T::one()));
-            // The BRDF sample's weight p_b / (p_b + p_e). A lobe that gives its own
-            // sample pdf 0 is a Dirac one (a mirror, GGX at r = 0), which no other
-            // strategy reaches: weight 1.
-            let p_bsdf = bsdf.pdf(&shading.surface, shading.wo, sample.wi);
-            let lobe = p_bsdf.gt(zero);
-            let p_env = EnvPdfVars::new(tape, sampler).pdf(wi);
-            let w_bsdf = lobe.select(p_bsdf / lobe.select(p_bsdf + p_env, one), one);
-            // The env sample: f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q)
-            // with q = 1 / p_e, which is 0 on a pole (p_e infinite there).
             let lights = per_pixel_draws(hits, (0..hits.len()).collect(), LIGHT_STREAM, |rng| {
                 sampler.sample(rng.next_2d())
             });
-            let constant = |f: &dyn Fn(&crate::sampling::EnvSample) -> f32| {
-                tape.constant(&lights.iter().map(|l| T::c(f(l) as f64)).collect::<Vec<T>>())
-            };
-            let wi_env = Vec3Var::new(
-                constant(&|l| l.direction.x),
-                constant(&|l| l.direction.y),
-                constant(&|l| l.direction.z),
-            );
-            let q = constant(&|l| 1.0 / l.pdf);
-            let wi_env_local = shading.to_local(wi_env);
-            let f_cos = bsdf.eval(&shading.surface, shading.wo, wi_env_local);
-            let p_bsdf_env = bsdf.pdf(&shading.surface, shading.wo, wi_env_local);
-            let lit_env = unshadowed(wi_env);
-            let env_scale = scale * lit_env * q / p_bsdf_env.mul_add(q, one);
+            let mis = Mis::new(tape, sampler, bsdf, &shading, &sample, wi, &lights);
+            let lit_env = unshadowed(mis.wi_env);
             let env_samples = LightSamples {
-                wi: wi_env,
-                throughput: f_cos.map(|f| f * env_scale),
+                wi: mis.wi_env,
+                throughput: mis.env_weight.map(|f| f * scale * lit_env),
                 lit: lit_env,
                 segment: s.segment,
                 pixels: hits.pixels.len(),
@@ -736,7 +717,7 @@ pub fn light_samples_with<'t, T: Real>(
             };
             LightSamples {
                 direct: 2 * hits.len(),
-                ..bsdf_samples(Some(w_bsdf)).followed_by(env_samples)
+                ..bsdf_samples(Some(mis.bsdf_weight)).followed_by(env_samples)
             }
         }
     };
@@ -750,9 +731,70 @@ pub fn light_samples_with<'t, T: Real>(
         lit,
         segment: s.segment,
     };
-    match bounce(tape, hits, occluder, probe, posed, triangles, bsdf, &first) {
+    match bounce(
+        tape,
+        hits,
+        occluder,
+        probe,
+        posed,
+        triangles,
+        bsdf,
+        sampling.env,
+        &first,
+    ) {
         Some(bounced) => direct.followed_by(bounced),
         None => direct,
+    }
+}
+
+/// One BRDF sample and one env-map sample per shading point combined by
+/// the balance heuristic (see [`light_samples_with`]).
+struct Mis<'t, T: Real> {
+    /// The BRDF sample's weight p_b / (p_b + p_e).
+    bsdf_weight: Var<'t, T>,
+    /// The env samples' directions (world).
+    wi_env: Vec3Var<'t, T>,
+    /// The env samples' `f cos / p_e * p_e / (p_e + p_b)`, RGB.
+    env_weight: [Var<'t, T>; 3],
+}
+
+impl<'t, T: Real> Mis<'t, T> {
+    /// `sample` (at `wi`, world) and `lights`, one per shading point.
+    fn new(
+        tape: &'t Tape<T>,
+        sampler: &EnvSampler,
+        bsdf: &dyn Bsdf<T>,
+        shading: &Shading<'t, T>,
+        sample: &BsdfSample<'t, T>,
+        wi: Vec3Var<'t, T>,
+        lights: &[EnvSample],
+    ) -> Self {
+        let (zero, one) = (tape.scalar(T::zero()), tape.scalar(T::one()));
+        // A lobe that gives its own sample pdf 0 is a Dirac one (a mirror,
+        // GGX at r = 0), which no other strategy reaches: weight 1.
+        let p_bsdf = bsdf.pdf(&shading.surface, shading.wo, sample.wi);
+        let lobe = p_bsdf.gt(zero);
+        let p_env = EnvPdfVars::new(tape, sampler).pdf(wi);
+        let constant = |f: &dyn Fn(&EnvSample) -> f32| {
+            tape.constant(&lights.iter().map(|l| T::c(f(l) as f64)).collect::<Vec<T>>())
+        };
+        let wi_env = Vec3Var::new(
+            constant(&|l| l.direction.x),
+            constant(&|l| l.direction.y),
+            constant(&|l| l.direction.z),
+        );
+        // f cos / p_e * p_e / (p_e + p_b) = f cos q / (1 + p_b q) with
+        // q = 1 / p_e, which is 0 on a pole (p_e infinite there).
+        let q = constant(&|l| 1.0 / l.pdf);
+        let wi_env_local = shading.to_local(wi_env);
+        let f_cos = bsdf.eval(&shading.surface, shading.wo, wi_env_local);
+        let p_bsdf_env = bsdf.pdf(&shading.surface, shading.wo, wi_env_local);
+        let share = q / p_bsdf_env.mul_add(q, one);
+        Mis {
+            bsdf_weight: lobe.select(p_bsdf / lobe.select(p_bsdf + p_env, one), one),
+            wi_env,
+            env_weight: f_cos.map(|f| f * share),
+        }
     }
 }
 
@@ -793,12 +835,13 @@ struct FirstBounce<'t, T: Real> {
 
 /// The BRDF samples of `first` that the probe shadows, gone on from the
 /// point of the probe each one hits: one BRDF sample of that point's
-/// material reads the env map, shadowed in turn (a second bounce is left
-/// out). Its throughput is the product of both samples': the first's
-/// without an MIS weight, since no env-map sample reaches the light the
-/// probe reflects. Differentiable as the first samples are (the second
-/// hit point moves with the pose along the first sample's moving ray).
-/// `None` when nothing is shadowed.
+/// material reads the env map, and with a `sampler` one env-map sample
+/// too, the two combined by MIS as at the first point; each shadowed in
+/// turn (a second bounce is left out). Their throughput is the product of
+/// the first sample's, without an MIS weight (no env-map sample reaches
+/// the light the probe reflects), and their own. Differentiable as the
+/// first samples are (the second hit point moves with the pose along the
+/// first sample's moving ray). `None` when nothing is shadowed.
 #[allow(clippy::too_many_arguments)]
 fn bounce<'t, T: Real>(
     tape: &'t Tape<T>,
@@ -808,6 +851,7 @@ fn bounce<'t, T: Real>(
     posed: &PosedMesh<'t, T>,
     triangles: &[[u32; 3]],
     bsdf: &dyn Bsdf<T>,
+    sampler: Option<&EnvSampler>,
     first: &FirstBounce<'t, T>,
 ) -> Option<LightSamples<'t, T>> {
     let lit = tape.to_vec(first.lit);
@@ -841,16 +885,38 @@ fn bounce<'t, T: Real>(
             .map(|i| Vec3::from_array(p.each_ref().map(|p| p[i].to_f32().unwrap_or(f32::NAN))))
             .collect()
     };
-    let lit = tape.constant(&occluder.unshadowed(&points, &values(wi)));
-    let scale = shading.visibility * lit;
-    Some(LightSamples {
+    let unshadowed = |w: Vec3Var<'t, T>| tape.constant(&occluder.unshadowed(&points, &values(w)));
+    let lit = unshadowed(wi);
+    // The first sample's throughput, then the second point's visibility.
+    let weight = first.weight.map(|w| at_samples(w, idx) * shading.visibility);
+    let segment = first.segment.gather(idx);
+    let bsdf_samples = |mis_weight: Option<Var<'t, T>>| LightSamples {
         wi,
-        throughput: std::array::from_fn(|c| at_samples(first.weight[c], idx) * sample.weight[c] * scale),
+        throughput: std::array::from_fn(|c| match mis_weight {
+            Some(m) => weight[c] * sample.weight[c] * lit * m,
+            None => weight[c] * sample.weight[c] * lit,
+        }),
         lit,
-        segment: first.segment.gather(idx),
+        segment,
         pixels: hits.pixels.len(),
         direct: 0,
-    })
+    };
+    let Some(sampler) = sampler else {
+        return Some(bsdf_samples(None));
+    };
+    let samples = blocked.iter().map(|b| b.0).collect();
+    let lights = per_pixel_draws(hits, samples, BOUNCE_LIGHT_STREAM, |rng| sampler.sample(rng.next_2d()));
+    let mis = Mis::new(tape, sampler, bsdf, &shading, &sample, wi, &lights);
+    let lit_env = unshadowed(mis.wi_env);
+    let env_samples = LightSamples {
+        wi: mis.wi_env,
+        throughput: std::array::from_fn(|c| weight[c] * mis.env_weight[c] * lit_env),
+        lit: lit_env,
+        segment,
+        pixels: hits.pixels.len(),
+        direct: 0,
+    };
+    Some(bsdf_samples(Some(mis.bsdf_weight)).followed_by(env_samples))
 }
 
 /// Renders the probe's radiance into the pixels of `hits`: one array per

@@ -261,15 +261,21 @@ fn the_same_seed_gives_the_same_image_on_any_thread_count() {
 }
 
 /// Two renders (seeds 1 and 2) of the can under `env` by BRDF sampling,
-/// then two by MIS: per fully covered pixel, the sum of its channels.
-fn can_by_both_strategies(env: &EnvMap, fov_y_deg: f32, spp: u32) -> [[Vec<f64>; 2]; 2] {
+/// then two by MIS (with one bounce of inter-reflection when
+/// `interreflection`, sampled the same way at its second point): per fully
+/// covered pixel, the sum of its channels.
+fn can_by_both_strategies(env: &EnvMap, camera: &Camera, spp: u32, interreflection: bool) -> [[Vec<f64>; 2]; 2] {
     let probe = SodaCan::default().build();
-    let camera = can_camera(fov_y_deg);
     let sampler = EnvSampler::new(env);
-    [LightSampling::BSDF, LightSampling::mis(&sampler)].map(|sampling| {
+    let strategies = [LightSampling::BSDF, LightSampling::mis(&sampler)];
+    strategies.map(|sampling| {
+        let sampling = LightSampling {
+            interreflection,
+            ..sampling
+        };
         [1, 2].map(|seed| {
             let settings = RenderSettings { spp, seed };
-            let (hits, rgb) = render(&probe, &Pose::IDENTITY, &camera, env, &GgxMetal, settings, &sampling);
+            let (hits, rgb) = render(&probe, &Pose::IDENTITY, camera, env, &GgxMetal, settings, &sampling);
             let inside = (0..hits.pixels.len()).filter(|&k| hits.coverage[k] == 1.0);
             inside.map(|k| rgb[0][k] + rgb[1][k] + rgb[2][k]).collect()
         })
@@ -290,8 +296,30 @@ fn mis_and_bsdf_sampling_agree_on_the_can_under_studio() {
     // Studio at 64 rows: its lights still a few texels wide, while BRDF
     // sampling converges well enough to tell a bias of 1 %.
     let env = studio().downsample(64);
-    let [[bsdf, bsdf2], [mis, mis2]] = can_by_both_strategies(&env, 10.0, 512);
-    assert!(bsdf.len() > 2000, "too few covered pixels: {}", bsdf.len());
+    the_strategies_agree(can_by_both_strategies(&env, &can_camera(10.0), 512, false), 2000);
+}
+
+#[test]
+fn mis_and_bsdf_sampling_agree_on_the_light_the_can_reflects_onto_its_lid() {
+    // From above: the lid, which its rim shadows and lights by reflection.
+    let camera = Camera::new(
+        64,
+        64,
+        8.0,
+        Vec3::new(0.0, 0.4, 0.2),
+        Vec3::new(0.0, 0.122, 0.0),
+        Vec3::Y,
+    )
+    .expect("camera");
+    let env = EnvMap::read(envmaps().join("courtyard.exr"))
+        .expect("env")
+        .downsample(8);
+    the_strategies_agree(can_by_both_strategies(&env, &camera, 512, true), 400);
+}
+
+/// BRDF sampling and MIS give the same image up to their noise.
+fn the_strategies_agree([[bsdf, bsdf2], [mis, mis2]]: [[Vec<f64>; 2]; 2], min_pixels: usize) {
+    assert!(bsdf.len() > min_pixels, "too few covered pixels: {}", bsdf.len());
     // Each estimator's per-pixel variance, from its two seeds.
     let variance = [(&bsdf, &bsdf2), (&mis, &mis2)].map(|(a, b)| mean_square_difference(a, b) / 2.0);
     // Per pixel, the two differ by their noise alone.
@@ -306,7 +334,9 @@ fn mis_and_bsdf_sampling_agree_on_the_can_under_studio() {
     let standard_error = (noise / bsdf.len() as f64).sqrt();
     assert!(
         standard_error < 0.0075 * mean(&bsdf),
-        "too noisy to tell: standard error {standard_error}"
+        "too noisy to tell: standard error {standard_error}, mean {}, {} pixels",
+        mean(&bsdf),
+        bsdf.len()
     );
     assert!(
         error.abs() < 4.0 * standard_error,
@@ -322,7 +352,7 @@ fn mis_is_much_less_noisy_than_bsdf_sampling_under_studio() {
     // a can 200 pixels tall), so that the noise measured is the lighting's,
     // not the variation of the texture and normals within a pixel, which no
     // light sampling removes.
-    let [[bsdf, bsdf2], [mis, mis2]] = can_by_both_strategies(&studio(), 4.0, 16);
+    let [[bsdf, bsdf2], [mis, mis2]] = can_by_both_strategies(&studio(), &can_camera(4.0), 16, false);
     let ratio = mean_square_difference(&bsdf, &bsdf2) / mean_square_difference(&mis, &mis2);
     assert!(ratio > 20.0, "per-pixel variance only {ratio} times lower with MIS");
 }
