@@ -688,38 +688,24 @@ pub fn light_samples_with<'t, T: Real>(
     let lit = unshadowed(wi);
     // The BRDF sample's throughput before its shadow and MIS weight.
     let weight = sample.weight.map(|w| w * scale);
-    let bsdf_samples = |mis_weight: Option<Var<'t, T>>| LightSamples {
+    let lights = sampling.env.map(|sampler| {
+        let lights = per_pixel_draws(hits, (0..hits.len()).collect(), LIGHT_STREAM, |rng| {
+            sampler.sample(rng.next_2d())
+        });
+        (sampler, lights)
+    });
+    let points = PointSamples {
+        shading: &shading,
+        sample: &sample,
         wi,
-        throughput: weight.map(|w| match mis_weight {
-            Some(m) => w * lit * m,
-            None => w * lit,
-        }),
         lit,
         segment: s.segment,
         pixels: hits.pixels.len(),
-        direct: hits.len(),
     };
-    let direct = match sampling.env {
-        None => bsdf_samples(None),
-        Some(sampler) => {
-            let lights = per_pixel_draws(hits, (0..hits.len()).collect(), LIGHT_STREAM, |rng| {
-                sampler.sample(rng.next_2d())
-            });
-            let mis = Mis::new(tape, sampler, bsdf, &shading, &sample, wi, &lights);
-            let lit_env = unshadowed(mis.wi_env);
-            let env_samples = LightSamples {
-                wi: mis.wi_env,
-                throughput: mis.env_weight.map(|f| f * scale * lit_env),
-                lit: lit_env,
-                segment: s.segment,
-                pixels: hits.pixels.len(),
-                direct: hits.len(),
-            };
-            LightSamples {
-                direct: 2 * hits.len(),
-                ..bsdf_samples(Some(mis.bsdf_weight)).followed_by(env_samples)
-            }
-        }
+    let direct = points.light(tape, bsdf, weight, [scale; 3], &unshadowed, lights.as_ref());
+    let direct = LightSamples {
+        direct: direct.lit.len(),
+        ..direct
     };
     if !sampling.interreflection {
         return direct;
@@ -886,37 +872,79 @@ fn bounce<'t, T: Real>(
             .collect()
     };
     let unshadowed = |w: Vec3Var<'t, T>| tape.constant(&occluder.unshadowed(&points, &values(w)));
-    let lit = unshadowed(wi);
     // The first sample's throughput, then the second point's visibility.
     let weight = first.weight.map(|w| at_samples(w, idx) * shading.visibility);
-    let segment = first.segment.gather(idx);
-    let bsdf_samples = |mis_weight: Option<Var<'t, T>>| LightSamples {
+    let lights = sampler.map(|sampler| {
+        let samples = blocked.iter().map(|b| b.0).collect();
+        let lights = per_pixel_draws(hits, samples, BOUNCE_LIGHT_STREAM, |rng| sampler.sample(rng.next_2d()));
+        (sampler, lights)
+    });
+    let points = PointSamples {
+        shading: &shading,
+        sample: &sample,
         wi,
-        throughput: std::array::from_fn(|c| match mis_weight {
-            Some(m) => weight[c] * sample.weight[c] * lit * m,
-            None => weight[c] * sample.weight[c] * lit,
-        }),
-        lit,
-        segment,
+        lit: unshadowed(wi),
+        segment: first.segment.gather(idx),
         pixels: hits.pixels.len(),
-        direct: 0,
     };
-    let Some(sampler) = sampler else {
-        return Some(bsdf_samples(None));
-    };
-    let samples = blocked.iter().map(|b| b.0).collect();
-    let lights = per_pixel_draws(hits, samples, BOUNCE_LIGHT_STREAM, |rng| sampler.sample(rng.next_2d()));
-    let mis = Mis::new(tape, sampler, bsdf, &shading, &sample, wi, &lights);
-    let lit_env = unshadowed(mis.wi_env);
-    let env_samples = LightSamples {
-        wi: mis.wi_env,
-        throughput: std::array::from_fn(|c| weight[c] * mis.env_weight[c] * lit_env),
-        lit: lit_env,
-        segment,
-        pixels: hits.pixels.len(),
-        direct: 0,
-    };
-    Some(bsdf_samples(Some(mis.bsdf_weight)).followed_by(env_samples))
+    let bsdf_weight = std::array::from_fn(|c| weight[c] * sample.weight[c]);
+    Some(points.light(tape, bsdf, bsdf_weight, weight, &unshadowed, lights.as_ref()))
+}
+
+/// A BRDF sample at each of a set of shading points, with its shadow test.
+struct PointSamples<'a, 't, T: Real> {
+    shading: &'a Shading<'t, T>,
+    sample: &'a BsdfSample<'t, T>,
+    /// The sample's direction (world).
+    wi: Vec3Var<'t, T>,
+    lit: Var<'t, T>,
+    /// The points' positions in `hits.pixels`.
+    segment: Var<'t, T>,
+    /// Number of pixels (segments).
+    pixels: usize,
+}
+
+impl<'a, 't, T: Real> PointSamples<'a, 't, T> {
+    /// The light samples: the BRDF samples, whose throughput before the
+    /// shadow test is `bsdf_weight`, and with `env` (the sampler and one
+    /// light drawn per point) the env-map samples too, each times its MIS
+    /// weight; `prefix` is the throughput up to the points, `unshadowed`
+    /// their shadow test. `direct` is left 0.
+    fn light(
+        &self,
+        tape: &'t Tape<T>,
+        bsdf: &dyn Bsdf<T>,
+        bsdf_weight: [Var<'t, T>; 3],
+        prefix: [Var<'t, T>; 3],
+        unshadowed: &dyn Fn(Vec3Var<'t, T>) -> Var<'t, T>,
+        env: Option<&(&EnvSampler, Vec<EnvSample>)>,
+    ) -> LightSamples<'t, T> {
+        let bsdf_samples = |mis_weight: Option<Var<'t, T>>| LightSamples {
+            wi: self.wi,
+            throughput: bsdf_weight.map(|w| match mis_weight {
+                Some(m) => w * self.lit * m,
+                None => w * self.lit,
+            }),
+            lit: self.lit,
+            segment: self.segment,
+            pixels: self.pixels,
+            direct: 0,
+        };
+        let Some((sampler, lights)) = env else {
+            return bsdf_samples(None);
+        };
+        let mis = Mis::new(tape, sampler, bsdf, self.shading, self.sample, self.wi, lights);
+        let lit_env = unshadowed(mis.wi_env);
+        let env_samples = LightSamples {
+            wi: mis.wi_env,
+            throughput: std::array::from_fn(|c| mis.env_weight[c] * prefix[c] * lit_env),
+            lit: lit_env,
+            segment: self.segment,
+            pixels: self.pixels,
+            direct: 0,
+        };
+        bsdf_samples(Some(mis.bsdf_weight)).followed_by(env_samples)
+    }
 }
 
 /// Renders the probe's radiance into the pixels of `hits`: one array per
