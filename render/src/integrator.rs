@@ -135,12 +135,9 @@ impl Occluder {
         );
         (0..points.len())
             .into_par_iter()
-            .map(|i| {
-                let d = directions.each_ref().map(|d| d[i].to_f32().unwrap_or(f32::NAN));
-                match self.lit(points[i], Vec3::from_array(d)) {
-                    true => T::one(),
-                    false => T::zero(),
-                }
+            .map(|i| match self.lit(points[i], vec3_at(directions, i)) {
+                true => T::one(),
+                false => T::zero(),
             })
             .collect()
     }
@@ -470,16 +467,17 @@ impl<'t, T: Real> Shading<'t, T> {
         let n = hit.interpolate3(posed.normals).normalize(T::c(1e-12));
         let [u, v] = posed.uv.map(|uv| hit.interpolate(uv));
         let (s, t) = frame(n, wo_world);
-        let frame = [s, t, n];
-        Shading {
-            frame,
-            wo: Vec3Var::new(s.dot(wo_world), t.dot(wo_world), n.dot(wo_world)),
+        let mut shading = Shading {
+            frame: [s, t, n],
+            wo: wo_world,
             surface: Surface {
                 albedo: probe.albedo.lookup(u, v),
                 roughness: probe.roughness.lookup(u, v)[0],
             },
             visibility: probe.visibility.lookup(u, v)[0],
-        }
+        };
+        shading.wo = shading.to_local(wo_world);
+        shading
     }
 
     fn to_local(&self, w: Vec3Var<'t, T>) -> Vec3Var<'t, T> {
@@ -689,7 +687,7 @@ pub fn light_samples_with<'t, T: Real>(
     // The BRDF sample's throughput before its shadow and MIS weight.
     let weight = sample.weight.map(|w| w * scale);
     let lights = sampling.env.map(|sampler| {
-        let lights = per_pixel_draws(hits, (0..hits.len()).collect(), LIGHT_STREAM, |rng| {
+        let lights = per_pixel_draws(hits, &(0..hits.len()).collect::<Vec<_>>(), LIGHT_STREAM, |rng| {
             sampler.sample(rng.next_2d())
         });
         (sampler, lights)
@@ -790,12 +788,17 @@ fn values<T: Real>(w: Vec3Var<'_, T>) -> [Vec<T>; 3] {
     [w.x, w.y, w.z].map(|c| tape.to_vec(c))
 }
 
+/// Element `i` of x, y, z value arrays (NaN where a value has no f32).
+fn vec3_at<T: Real>(xyz: &[Vec<T>; 3], i: usize) -> Vec3 {
+    Vec3::from_array(xyz.each_ref().map(|c| c[i].to_f32().unwrap_or(f32::NAN)))
+}
+
 /// One draw per listed hit sample (`samples`, in order) from its pixel's
 /// random number stream `stream + pixel`, the pixel's samples in order: the
 /// same whatever the thread count.
 fn per_pixel_draws<D: Send>(
     hits: &PrimaryHits,
-    samples: Vec<usize>,
+    samples: &[usize],
     stream: u64,
     draw: impl Fn(&mut Rng) -> D + Sync,
 ) -> Vec<D> {
@@ -842,11 +845,10 @@ fn bounce<'t, T: Real>(
 ) -> Option<LightSamples<'t, T>> {
     let lit = tape.to_vec(first.lit);
     let d = values(first.wi);
-    let direction = |i: usize| Vec3::from_array(d.each_ref().map(|d| d[i].to_f32().unwrap_or(f32::NAN)));
     let blocked: Vec<(usize, u32)> = (0..hits.len())
         .into_par_iter()
         .filter(|&i| lit[i] == T::zero())
-        .filter_map(|i| occluder.blocker(hits.point[i], direction(i)).map(|t| (i, t)))
+        .filter_map(|i| occluder.blocker(hits.point[i], vec3_at(&d, i)).map(|t| (i, t)))
         .collect();
     if blocked.is_empty() {
         return None;
@@ -859,24 +861,20 @@ fn bounce<'t, T: Real>(
     let origin = first.hit.subset(idx).interpolate3(posed.positions);
     let hit = SurfaceHit::find(origin, ray, corners, posed.positions);
     let shading = Shading::at(&hit, -ray, probe, posed);
-    let random = per_pixel_draws(hits, blocked.iter().map(|b| b.0).collect(), BOUNCE_STREAM, |rng| {
-        rng.next_2d()
-    });
+    let samples: Vec<usize> = blocked.iter().map(|b| b.0).collect();
+    let random = per_pixel_draws(hits, &samples, BOUNCE_STREAM, |rng| rng.next_2d());
     let random = [0, 1].map(|k| tape.constant(&random.iter().map(|r| T::c(r[k] as f64)).collect::<Vec<T>>()));
     let sample = bsdf.sample(&shading.surface, shading.wo, random);
     let wi = shading.to_world(sample.wi);
     let points: Vec<Vec3> = {
         let p = values(hit.interpolate3(posed.positions));
-        (0..blocked.len())
-            .map(|i| Vec3::from_array(p.each_ref().map(|p| p[i].to_f32().unwrap_or(f32::NAN))))
-            .collect()
+        (0..blocked.len()).map(|i| vec3_at(&p, i)).collect()
     };
     let unshadowed = |w: Vec3Var<'t, T>| tape.constant(&occluder.unshadowed(&points, &values(w)));
     // The first sample's throughput, then the second point's visibility.
     let weight = first.weight.map(|w| at_samples(w, idx) * shading.visibility);
     let lights = sampler.map(|sampler| {
-        let samples = blocked.iter().map(|b| b.0).collect();
-        let lights = per_pixel_draws(hits, samples, BOUNCE_LIGHT_STREAM, |rng| sampler.sample(rng.next_2d()));
+        let lights = per_pixel_draws(hits, &samples, BOUNCE_LIGHT_STREAM, |rng| sampler.sample(rng.next_2d()));
         (sampler, lights)
     });
     let points = PointSamples {

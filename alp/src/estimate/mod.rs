@@ -761,10 +761,9 @@ fn fit_lighting(
 /// changes between the pixel and a 4-neighbour: their directional
 /// albedos, their `direct` samples' summed throughputs over their `lit`
 /// shares (the probe's shadow taken out), differ by more than
-/// [`EDGE_CONTRAST`]):
-/// a pose off by a fraction of a pixel puts the photo's edge elsewhere, and
-/// the output map would take the probe's colours in (a label's red in the
-/// sky). An edge of a shadow is none: it moves with the pose smoothly, as
+/// [`EDGE_CONTRAST`]): a pose off by a fraction of a pixel puts the photo's
+/// edge elsewhere, and the output map would take the probe's colours in (a
+/// label's red in the sky). An edge of a shadow is none: it moves with the pose smoothly, as
 /// the shading does. (Counted as edges, the pixels along the probe's own
 /// shadows were left out, and with them the sky only they see: the suite's
 /// tilted courtyard can, path-traced by Mitsuba, at its true pose scored
@@ -829,7 +828,8 @@ fn albedo_edges(
 struct LitShares {
     /// Of the pixel's direct samples, the share that reaches the map.
     direct: Vec<f64>,
-    /// The same, counting a shadowed sample whose bounce reaches it.
+    /// The same, counting a shadowed sample whose bounce reaches it (BRDF
+    /// sampling gives a shadowed sample one bounce sample, no more).
     followed: Vec<f64>,
 }
 
