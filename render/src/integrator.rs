@@ -536,7 +536,7 @@ impl<'t, T: Real> Recip for Var<'t, T> {
 /// Where each light sample reads the environment, and what it passes on: the
 /// image is `sum over samples of throughput * L_env(wi)` per pixel, linear
 /// in the environment map (the lighting solve uses this form directly).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct LightSamples<'t, T: Real> {
     /// World direction of the sample (towards the light).
     pub wi: Vec3Var<'t, T>,
@@ -555,6 +555,10 @@ pub struct LightSamples<'t, T: Real> {
     /// the env-map samples, with MIS); the rest after one bounce off the
     /// probe ([`LightSampling::interreflection`]).
     pub direct: usize,
+    /// Per sample, whether its direction was drawn from the env map's
+    /// sampler (MIS) rather than from the BRDF's lobe: the BRDF samples
+    /// alone tell what share of a point's lobe the probe shadows.
+    pub env_sampled: Vec<bool>,
 }
 
 impl<'t, T: Real> LightSamples<'t, T> {
@@ -577,6 +581,7 @@ impl<'t, T: Real> LightSamples<'t, T> {
             throughput: std::array::from_fn(|c| both(self.throughput[c], more.throughput[c])),
             lit: both(self.lit, more.lit),
             segment: both(self.segment, more.segment),
+            env_sampled: [self.env_sampled, more.env_sampled].concat(),
             ..self
         }
     }
@@ -927,6 +932,7 @@ impl<'a, 't, T: Real> PointSamples<'a, 't, T> {
             segment: self.segment,
             pixels: self.pixels,
             direct: 0,
+            env_sampled: vec![false; self.lit.len()],
         };
         let Some((sampler, lights)) = env else {
             return bsdf_samples(None);
@@ -940,6 +946,7 @@ impl<'a, 't, T: Real> PointSamples<'a, 't, T> {
             segment: self.segment,
             pixels: self.pixels,
             direct: 0,
+            env_sampled: vec![true; lit_env.len()],
         };
         bsdf_samples(Some(mis.bsdf_weight)).followed_by(env_samples)
     }

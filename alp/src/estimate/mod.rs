@@ -63,6 +63,7 @@ use render::mesh::EdgeAdjacency;
 use render::pose::Pose;
 use render::posed::{POSE_PARAMS, PoseVars, PosedMesh, pack_pose, unpack_pose};
 use render::probe::ProbeAsset;
+use render::sampling::EnvSampler;
 use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 use render::{RenderError, Result};
 use serde::Serialize;
@@ -122,14 +123,25 @@ pub struct Settings {
     pub pose_iters: usize,
     /// Samples per pixel while fitting the pose.
     pub spp_pose: u32,
-    /// Samples per pixel of the final lighting solve. Transport noise is
-    /// what the converged solve fits last (a bright light's rim takes the
-    /// colour of the pixels whose few samples undercounted it; the studio
-    /// can at its true pose: 12.2/2.0/2.7 deg at 64, 9.7/1.1/1.3 at 128,
-    /// 7.4/0.8/0.6 at 256): 128 at default quality. Suite of 18: 6.78/1.94/
-    /// 2.12 deg at 32, 6.31/1.67/1.70 at 64, 6.16/1.60/1.50 at 128 (wall
-    /// median 7.9 s, max RSS 597 MB), 5.94/1.56/1.45 at 256 (12.6 s, on a
-    /// machine shared with builds).
+    /// Samples per pixel of the pilot map that guides the final transport's
+    /// env-map samples (0: no pilot, BRDF samples alone). Transport noise
+    /// is what the converged solve fits last: a small bright light that a
+    /// pixel's lobe finds by a few BRDF samples gives it too much or too
+    /// little, and the solve puts the difference in the texels around the
+    /// light, in the colours of the pixels that saw it (a red rim from a
+    /// can's label). Sampling the light where the pilot map has it (MIS)
+    /// takes most of that noise out. At the true pose of the suite's 18
+    /// Mitsuba twins: BRDF samples at 128 spp, 5.15 / 1.11 / 0.89 deg
+    /// mirror / shiny / diffuse; pilot 32 spp, then MIS at 128, 4.46 /
+    /// 1.02 / 0.74 (the upright studio can 8.52 -> 4.51 in mirror); pilot
+    /// 16, MIS at 64, 4.53 / 1.04 / 0.78, and 4.41 / 0.99 / 0.70 with the
+    /// final solve started from the pilot's map (relative smoothness and
+    /// floor at its level) instead of coarse to fine.
+    pub spp_pilot: u32,
+    /// Samples per pixel of the final lighting solve (per strategy: with
+    /// a pilot, each hit has a BRDF and an env-map sample). BRDF samples
+    /// alone, the studio can at its true pose: 12.2/2.0/2.7 deg at 64,
+    /// 9.7/1.1/1.3 at 128, 7.4/0.8/0.6 at 256.
     pub spp_final: u32,
     /// Working env map height (None: from the probe's roughness).
     pub working_height: Option<usize>,
@@ -147,22 +159,29 @@ pub struct Settings {
 impl Settings {
     /// How many phases a run is expected to have before the mask is seen:
     /// one axis hypothesis (the upright one) with every start turned from
-    /// it, per joint round a lighting solve and a pose phase, and the final
-    /// solve (only the final solve when the pose is known). The run adds to
-    /// it as it learns more (see [`estimate_with_progress`]).
+    /// it, per joint round a lighting solve and a pose phase, then the
+    /// pilot map's solve and the final one (only these when the pose is
+    /// known). The run adds to it as it learns more (see
+    /// [`estimate_with_progress`]).
     pub fn phase_count(&self) -> usize {
+        let output = 1 + (self.spp_pilot > 0) as usize;
         match self.known_pose {
-            Some(_) => 1,
-            None => 1 + self.starts_deg.len() + 2 * self.rounds + 1,
+            Some(_) => output,
+            None => 1 + self.starts_deg.len() + 2 * self.rounds + output,
         }
     }
 
     /// The preset for `quality`.
     pub fn new(quality: Quality) -> Self {
-        let (starts_deg, axes_kept, silhouette_iters, rounds, pose_iters, spp_pose, spp_final) = match quality {
-            Quality::Fast => (yaws(4), 2, 40, 0, 15, 1, 8),
-            Quality::Default => (yaws(8), 3, 50, 0, 20, 2, 128),
-            Quality::Best => (yaws(12), 4, 100, 0, 40, 4, 256),
+        let (starts_deg, axes_kept, silhouette_iters, rounds, pose_iters, spp_pose) = match quality {
+            Quality::Fast => (yaws(4), 2, 40, 0, 15, 1),
+            Quality::Default => (yaws(8), 3, 50, 0, 20, 2),
+            Quality::Best => (yaws(12), 4, 100, 0, 40, 4),
+        };
+        let (spp_pilot, spp_final) = match quality {
+            Quality::Fast => (8, 8),
+            Quality::Default => (16, 64),
+            Quality::Best => (32, 128),
         };
         Settings {
             quality,
@@ -174,6 +193,7 @@ impl Settings {
             rounds,
             pose_iters,
             spp_pose,
+            spp_pilot,
             spp_final,
             working_height: None,
             smoothness: 1e-3,
@@ -438,11 +458,12 @@ pub fn working_height(min_roughness: f32) -> usize {
 /// largest probe (51k pixels) at 128 spp takes 6.5M samples and 507 MB.
 pub const FINAL_SAMPLE_BUDGET: usize = 8 << 20;
 
-/// Samples per pixel of the final solve for a probe of `mask_pixels`:
+/// Samples per pixel of the output map's solves for a probe of
+/// `mask_pixels` with `strategies` light samples per hit (2 with MIS):
 /// `spp`, or as many as [`FINAL_SAMPLE_BUDGET`] allows, but at least
 /// [`SPP_PER_PASS`].
-pub fn final_spp(spp: u32, mask_pixels: usize) -> u32 {
-    let affordable = FINAL_SAMPLE_BUDGET / mask_pixels.max(1);
+pub fn final_spp(spp: u32, mask_pixels: usize, strategies: usize) -> u32 {
+    let affordable = FINAL_SAMPLE_BUDGET / (strategies * mask_pixels).max(1);
     spp.min(affordable.max(SPP_PER_PASS as usize) as u32)
 }
 
@@ -604,17 +625,24 @@ fn fit_lighting(
     clipped: &[bool],
     smoothness: f64,
     purpose: LightingPurpose,
+    sampling: &LightSampling,
     start: Option<&[f64]>,
 ) -> Result<LightingFit> {
     // Light samples in passes (`spp_per_pass`), each on its own tape:
     // memory stays that of one pass however many samples the transport
     // gathers. The first pass's pixels are the data; later passes' samples
-    // join their pixels (averaged over the passes).
-    let passes = settings.spp.div_ceil(spp_per_pass(photo.mask.count())).max(1);
+    // join their pixels (averaged over the passes). With MIS a hit has two
+    // light samples (the lying studio can at its true pose, 64 spp: 999 MB
+    // at most with one pass's hits as many as without, 687 MB with half).
+    let strategies = 1 + sampling.env.is_some() as usize;
+    let passes = settings
+        .spp
+        .div_ceil(spp_per_pass(strategies * photo.mask.count()))
+        .max(1);
     let mut reference: Option<PrimaryHits> = None;
     let mut row = Vec::new();
     let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::<Vec2>::new(), Vec::<[f32; 3]>::new());
-    let (mut direct, mut lit) = (Vec::new(), Vec::new());
+    let (mut direct, mut lit, mut env_sampled) = (Vec::new(), Vec::new(), Vec::new());
     for pass in 0..passes {
         let pass_settings = RenderSettings {
             spp: settings.spp.div_ceil(passes),
@@ -639,15 +667,6 @@ fn fit_lighting(
                 .enumerate()
                 .for_each(|(k, &p)| row[p as usize] = k as u32);
         }
-        // The output map follows one bounce of inter-reflection (a can's lid
-        // sees its rim, which reflects the sky): on the suite's Mitsuba twins
-        // at the true pose, with the weights below, 5.26 / 1.11 / 0.93 ->
-        // 5.15 / 1.04 / 0.90 deg mirror / shiny / diffuse (the upright
-        // courtyard can 6.19 / 1.39 / 0.46 -> 5.36 / 1.05 / 0.48).
-        let sampling = match purpose {
-            LightingPurpose::Output => LightSampling::BSDF.with_interreflection(),
-            LightingPurpose::Search => LightSampling::BSDF,
-        };
         let samples = light_samples_with(
             &tape,
             &hits,
@@ -656,7 +675,7 @@ fn fit_lighting(
             &posed,
             &probe.asset.mesh.triangles,
             &GgxMetal,
-            &sampling,
+            sampling,
         );
         let d = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
         let tp = samples.throughput.map(|t| tape.to_vec(t));
@@ -670,6 +689,7 @@ fn fit_lighting(
                 throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
                 direct.push(i < samples.direct);
                 lit.push(pass_lit[i] > 0.5);
+                env_sampled.push(samples.env_sampled[i]);
             }
         }
         if pass == 0 {
@@ -679,7 +699,7 @@ fn fit_lighting(
     let hits = reference.expect("at least one pass");
     let (target, mut weight) = pixel_targets(photo, &hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
-        let shares = LitShares::new(&segment, &direct, &lit, hits.pixels.len());
+        let shares = LitShares::new(&segment, &direct, &lit, &env_sampled, hits.pixels.len());
         let edges = albedo_edges(
             &hits,
             &row,
@@ -812,7 +832,9 @@ fn albedo_edges(
         .collect()
 }
 
-/// Per pixel, the shares of its light samples that reach the env map.
+/// Per pixel, the shares of its BRDF samples that reach the env map (the
+/// env map's samples, with MIS, go where its light is, not where the lobe
+/// is).
 /// Where the probe shadows a pixel's lobe it reflects light into it
 /// instead; the model follows one bounce of it, not more (the Mitsuba
 /// twins have two). The output map's data term weighs each pixel by the
@@ -828,15 +850,16 @@ fn albedo_edges(
 struct LitShares {
     /// Of the pixel's direct samples, the share that reaches the map.
     direct: Vec<f64>,
-    /// The same, counting a shadowed sample whose bounce reaches it (BRDF
-    /// sampling gives a shadowed sample one bounce sample, no more).
+    /// The same, counting a shadowed sample whose bounce reaches it (a
+    /// shadowed sample has one BRDF sample at the bounce, no more).
     followed: Vec<f64>,
 }
 
 impl LitShares {
-    fn new(segment: &[u32], direct: &[bool], lit: &[bool], pixels: usize) -> Self {
+    fn new(segment: &[u32], direct: &[bool], lit: &[bool], env_sampled: &[bool], pixels: usize) -> Self {
         let mut counts = vec![(0u32, 0u32, 0u32); pixels];
-        for ((&s, &d), &l) in segment.iter().zip(direct).zip(lit) {
+        let brdf_sampled = (0..segment.len()).filter(|&k| !env_sampled[k]);
+        for (s, d, l) in brdf_sampled.map(|k| (segment[k], direct[k], lit[k])) {
             let c = &mut counts[s as usize];
             c.0 += d as u32;
             c.1 += (d && l) as u32;
@@ -1316,6 +1339,7 @@ fn search_pose(
             clipped,
             1.0,
             LightingPurpose::Search,
+            &LightSampling::BSDF,
             None,
         )?;
         let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
@@ -1416,6 +1440,7 @@ fn search_pose(
             clipped,
             search_smoothness,
             LightingPurpose::Search,
+            &LightSampling::BSDF,
             start,
         )?;
         let score = psnr(&fit.rendered, &fit.target, &fit.weight);
@@ -1514,8 +1539,51 @@ pub fn estimate_with_progress(
             (search.pose, search.axes, search.starts, Some(search.chosen))
         }
     };
+    // The output map's transport follows one bounce of inter-reflection (a
+    // can's lid sees its rim, which reflects the sky): on the suite's
+    // Mitsuba twins at the true pose, with LitShares' weights, 5.26 / 1.11
+    // / 0.93 -> 5.15 / 1.04 / 0.90 deg mirror / shiny / diffuse (the
+    // upright courtyard can 6.19 / 1.39 / 0.46 -> 5.36 / 1.05 / 0.48). A
+    // pilot map solved from BRDF samples then guides the final transport's
+    // env-map samples (MIS; see Settings::spp_pilot), and starts its solve.
     let t1 = Instant::now();
-    let final_spp = final_spp(settings.spp_final, photo.mask.count());
+    let pilot = match settings.spp_pilot {
+        0 => None,
+        spp => {
+            let pilot_settings = RenderSettings {
+                spp: final_spp(spp, photo.mask.count(), 1),
+                seed: settings.seed.wrapping_add(78),
+            };
+            let sampling = LightSampling::BSDF.with_interreflection();
+            let fit = fit_lighting(
+                &probe,
+                photo,
+                &pose,
+                work,
+                &pilot_settings,
+                &clipped,
+                settings.smoothness,
+                LightingPurpose::Output,
+                &sampling,
+                None,
+            )?;
+            let psnr_db = psnr(&fit.rendered, &fit.target, &fit.weight);
+            phases.push(lighting_report("lighting_pilot", &fit, t1, psnr_db));
+            Some(fit.env)
+        }
+    };
+    let t2 = Instant::now();
+    let sampler = pilot
+        .as_deref()
+        .map(|texels| env_from_texels(texels, work.0, work.1).map(|map| EnvSampler::new(&map)))
+        .transpose()?;
+    let sampling = match &sampler {
+        Some(sampler) => LightSampling::mis(sampler),
+        None => LightSampling::BSDF,
+    }
+    .with_interreflection();
+    let strategies = 1 + sampler.is_some() as usize;
+    let final_spp = final_spp(settings.spp_final, photo.mask.count(), strategies);
     let final_settings = RenderSettings {
         spp: final_spp,
         seed: settings.seed.wrapping_add(77),
@@ -1529,10 +1597,11 @@ pub fn estimate_with_progress(
         &clipped,
         settings.smoothness,
         LightingPurpose::Output,
-        None,
+        &sampling,
+        pilot.as_deref(),
     )?;
     let final_psnr = psnr(&fit.rendered, &fit.target, &fit.weight);
-    phases.push(lighting_report("lighting_final", &fit, t1, final_psnr));
+    phases.push(lighting_report("lighting_final", &fit, t2, final_psnr));
     let env = env_from_texels(&lighting::resample(&fit.env, work, (out_w, out_h)), out_w, out_h)?;
     let confidence: Vec<f64> = fit.transport.confidence().iter().flat_map(|&c| [c as f64; 3]).collect();
     let confidence = env_from_texels(&lighting::resample(&confidence, work, (out_w, out_h)), out_w, out_h)?;
