@@ -484,6 +484,52 @@ fn grad_cases<'a>(
 }
 
 #[test]
+fn env_sampled_marks_the_samples_the_env_map_sampler_drew() {
+    // A map dark but for one patch: the sampler draws only there, while
+    // the lobes of the lid view reach elsewhere too.
+    let top = grad_scene_from(false, LID_VIEW);
+    let (w, h) = (16, 8);
+    let patch = |k: usize| (k / w == 2 && (3..6).contains(&(k % w))) as u8 as f32;
+    let env = EnvMap::new(w, h, (0..w * h).map(|k| [patch(k); 3]).collect()).expect("env");
+    let sampler = EnvSampler::new(&env);
+    let tape = Tape::<f64>::new();
+    let probe = ProbeVars::new(&tape, &top.probe, false);
+    let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(&tape, &pack_pose(&top.pose), false));
+    let samples = light_samples_with(
+        &tape,
+        &top.hits,
+        &top.camera,
+        &probe,
+        &posed,
+        &top.probe.mesh.triangles,
+        &GgxMetal,
+        &LightSampling::mis(&sampler).with_interreflection(),
+    );
+    let wi = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
+    let density = |k: usize| sampler.pdf(Vec3::new(wi[0][k] as f32, wi[1][k] as f32, wi[2][k] as f32));
+    let count =
+        |from_env: bool, range: std::ops::Range<usize>| range.filter(|&k| samples.env_sampled[k] == from_env).count();
+    let (direct, all) = (samples.direct, samples.env_sampled.len());
+    // One BRDF and one env-map sample at every shading point, bounces included.
+    assert_eq!(count(true, 0..direct), count(false, 0..direct));
+    assert_eq!(count(true, direct..all), count(false, direct..all));
+    assert!(all > direct, "the lid view must bounce");
+    for k in (0..all).filter(|&k| samples.env_sampled[k]) {
+        assert!(
+            density(k) > 0.0,
+            "sample {k} is marked as the sampler's but lies where it never draws"
+        );
+    }
+    let elsewhere = (0..all)
+        .filter(|&k| !samples.env_sampled[k] && density(k) == 0.0)
+        .count();
+    assert!(
+        elsewhere > all / 10,
+        "BRDF samples outside the patch: {elsewhere} of {all}"
+    );
+}
+
+#[test]
 fn image_gradients_in_pose_match_finite_differences() {
     let (side, top) = (grad_scene(false), grad_scene_from(false, LID_VIEW));
     let inputs = [Input::Var(pack_pose(&side.pose).to_vec())];

@@ -593,6 +593,42 @@ mod tests {
     }
 
     #[test]
+    fn relative_smoothness_keeps_a_texel_the_data_drive_dark_above_the_floor() {
+        // One texel of the truth is black: the absolute solve recovers it,
+        // the relative one stops at the floor of the start's level (1).
+        let (w, h) = (8, 4);
+        let truth: Vec<f64> = (0..w * h * 3).map(|i| if i / 3 == 9 { 0.0 } else { 1.0 }).collect();
+        let uv: Vec<Vec2> = (0..w * h)
+            .map(|t| Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32))
+            .collect();
+        let segment: Vec<u32> = (0..uv.len() as u32).collect();
+        let transport = Transport::new(&segment, &uv, &vec![[1.0; 3]; uv.len()], uv.len(), w, h);
+        let mut target = vec![[0.0; 3]; uv.len()];
+        transport.apply(&truth, &mut target);
+        let dark = |relative_smoothness: bool| {
+            let settings = LightingSolve {
+                smoothness: 1e-9,
+                relative_smoothness,
+                max_iters: 500,
+            };
+            let (x, _) = solve(
+                &transport,
+                &target,
+                &vec![1.0; uv.len()],
+                settings,
+                &vec![1.0; w * h * 3],
+            );
+            [x[27], x[28], x[29]]
+        };
+        for v in dark(false) {
+            assert!(v.abs() < 1e-3, "absolute: {v}");
+        }
+        for v in dark(true) {
+            assert!((v - FLOOR_OF_LEVEL).abs() < 1e-3, "relative: {v}");
+        }
+    }
+
+    #[test]
     fn solve_recovers_a_map_the_transport_sees_whole() {
         recovers_a_map_seen_whole(|_| 1.0, 500);
     }

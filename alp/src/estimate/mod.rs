@@ -1664,4 +1664,19 @@ mod tests {
         // Colours that tie but relative errors 3e-3 apart: a pattern turned.
         assert!(!renders_alike(&start(5.0, 0.300), &start(5.01, 0.3009)));
     }
+
+    #[test]
+    fn lit_shares_count_the_brdf_samples_alone() {
+        // Pixel 0: a lit BRDF sample, a shadowed one whose bounce's BRDF
+        // sample is lit, each with an env-map sample (the first lit, the
+        // second shadowed), and the bounce's shadowed env-map sample.
+        // Pixel 1: one shadowed BRDF sample, no bounce, a lit env sample.
+        let segment = [0, 0, 0, 0, 0, 0, 1, 1];
+        let direct = [true, true, true, true, false, false, true, true];
+        let lit = [true, false, true, false, true, false, false, true];
+        let env_sampled = [false, false, true, true, false, true, false, true];
+        let shares = LitShares::new(&segment, &direct, &lit, &env_sampled, 2);
+        assert_eq!(shares.direct, [0.5, 0.0]);
+        assert_eq!(shares.followed, [1.0, 0.0]);
+    }
 }
