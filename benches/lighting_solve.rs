@@ -1,8 +1,9 @@
-//! The output map's lighting phase at a known pose, as `alp estimate --pose`
-//! runs it: light samples, the sparse transport at each level of the
-//! coarse-to-fine pyramid, and the bounded L-BFGS solves. The procedural can
-//! of the demo scene (640x480, courtyard) at 32 and 128 spp of the final
-//! solve; 1 and 2 threads. One JSON object per line.
+//! The output map's lighting phases at a known pose, as `alp estimate --pose`
+//! runs them: the pilot map (BRDF samples, the sparse transport at each
+//! level of the coarse-to-fine pyramid, bounded L-BFGS solves), then the
+//! final transport by MIS and its solve from the pilot map. The procedural
+//! can of the demo scene (640x480, courtyard) at 32 and 128 spp (per
+//! strategy) of the final solve; 1 and 2 threads. One JSON object per line.
 //!
 //! `cargo bench --bench lighting_solve`
 

@@ -8,7 +8,9 @@ use render::accel::Accel;
 use render::bsdf::{Bsdf, GgxMetal, Lambertian, Mirror};
 use render::camera::Camera;
 use render::envmap::EnvMap;
-use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with, shade};
+use render::integrator::{
+    LightSamples, LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with, shade,
+};
 use render::lookup::{ImageVars, TextureVars, image_texels};
 use render::mesh::Mesh;
 use render::pose::Pose;
@@ -453,6 +455,14 @@ impl GradScene {
 /// Where [`grad_scene_from`] sees the can's lid, which its rim shadows.
 const LID_VIEW: Vec3 = Vec3::new(0.5, 2.4, 3.0);
 
+/// The light samples of `g`'s probe at its pose, picked by `sampling`.
+fn light_samples_of<'t>(tape: &'t Tape<f64>, g: &GradScene, sampling: &LightSampling) -> LightSamples<'t, f64> {
+    let probe = ProbeVars::new(tape, &g.probe, false);
+    let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(tape, &pack_pose(&g.pose), false));
+    let triangles = &g.probe.mesh.triangles;
+    light_samples_with(tape, &g.hits, &g.camera, &probe, &posed, triangles, &GgxMetal, sampling)
+}
+
 /// The gradient checks: the side view by BRDF sampling and by MIS, and the
 /// lid view with inter-reflection (checked to bounce).
 fn grad_cases<'a>(
@@ -462,18 +472,7 @@ fn grad_cases<'a>(
 ) -> [(&'a GradScene, LightSampling<'a>); 3] {
     let bouncing = LightSampling::BSDF.with_interreflection();
     let tape = Tape::<f64>::new();
-    let probe = ProbeVars::new(&tape, &top.probe, false);
-    let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(&tape, &pack_pose(&top.pose), false));
-    let samples = light_samples_with(
-        &tape,
-        &top.hits,
-        &top.camera,
-        &probe,
-        &posed,
-        &top.probe.mesh.triangles,
-        &GgxMetal,
-        &bouncing,
-    );
+    let samples = light_samples_of(&tape, top, &bouncing);
     let bounces = samples.lit.len() - samples.direct;
     assert!(bounces > 10, "the lid view must bounce: {bounces} bounces");
     [
@@ -493,18 +492,7 @@ fn env_sampled_marks_the_samples_the_env_map_sampler_drew() {
     let env = EnvMap::new(w, h, (0..w * h).map(|k| [patch(k); 3]).collect()).expect("env");
     let sampler = EnvSampler::new(&env);
     let tape = Tape::<f64>::new();
-    let probe = ProbeVars::new(&tape, &top.probe, false);
-    let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(&tape, &pack_pose(&top.pose), false));
-    let samples = light_samples_with(
-        &tape,
-        &top.hits,
-        &top.camera,
-        &probe,
-        &posed,
-        &top.probe.mesh.triangles,
-        &GgxMetal,
-        &LightSampling::mis(&sampler).with_interreflection(),
-    );
+    let samples = light_samples_of(&tape, &top, &LightSampling::mis(&sampler).with_interreflection());
     let wi = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
     let density = |k: usize| sampler.pdf(Vec3::new(wi[0][k] as f32, wi[1][k] as f32, wi[2][k] as f32));
     let count =

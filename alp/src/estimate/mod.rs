@@ -131,7 +131,8 @@ pub struct Settings {
     /// light, in the colours of the pixels that saw it (a red rim from a
     /// can's label). Sampling the light where the pilot map has it (MIS)
     /// takes most of that noise out. At the true pose of the suite's 18
-    /// Mitsuba twins: BRDF samples at 128 spp, 5.15 / 1.11 / 0.89 deg
+    /// Mitsuba twins (smoothness 1e-3, the floor of the lighting solve
+    /// with MIS): BRDF samples at 128 spp, 5.15 / 1.11 / 0.89 deg
     /// mirror / shiny / diffuse; pilot 32 spp, then MIS at 128, 4.46 /
     /// 1.02 / 0.74 (the upright studio can 8.52 -> 4.51 in mirror); pilot
     /// 16, MIS at 64, 4.53 / 1.04 / 0.78, and 4.41 / 0.99 / 0.70 with the
@@ -640,7 +641,7 @@ fn fit_lighting(
     // gathers. The first pass's pixels are the data; later passes' samples
     // join their pixels (averaged over the passes). With MIS a hit has two
     // light samples (the lying studio can at its true pose, 64 spp: 999 MB
-    // at most with one pass's hits as many as without, 687 MB with half).
+    // at most with one pass's hits as many as without, 782 MB with half).
     let strategies = 1 + sampling.env.is_some() as usize;
     let passes = settings
         .spp
@@ -841,8 +842,7 @@ fn albedo_edges(
 
 /// Per pixel, the shares of its BRDF samples that reach the env map (the
 /// env map's samples, with MIS, go where its light is, not where the lobe
-/// is).
-/// Where the probe shadows a pixel's lobe it reflects light into it
+/// is). Where the probe shadows a pixel's lobe it reflects light into it
 /// instead; the model follows one bounce of it, not more (the Mitsuba
 /// twins have two). The output map's data term weighs each pixel by the
 /// square of the share the model follows to the env map (`followed`):
