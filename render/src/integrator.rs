@@ -629,6 +629,11 @@ impl<'a> LightSampling<'a> {
             ..self
         }
     }
+
+    /// Light samples per shading point: the BRDF's, and the env map's with MIS.
+    pub fn strategies(&self) -> usize {
+        1 + self.env.is_some() as usize
+    }
 }
 
 /// The light samples of every hit: the hit point on the (moving) triangle,

@@ -312,6 +312,9 @@ pub struct LightingSolve {
     /// Whether neighbour differences count relative to the start's local
     /// radiance level (else in absolute terms).
     pub relative_smoothness: bool,
+    /// The least radiance of a texel, as a fraction of the start's local
+    /// level (grey; 0: non-negative only).
+    pub floor_of_level: f64,
     /// L-BFGS iterations at most.
     pub max_iters: usize,
 }
@@ -320,8 +323,8 @@ pub struct LightingSolve {
 /// that level in the relative smoothness (no division by zero radiance).
 const DARK_LEVEL: f64 = 0.05;
 
-/// With relative smoothness, the least radiance of a texel, as a fraction
-/// of the start's local level (grey): no direction of a scene is black,
+/// The output map's least radiance of a texel, as a fraction of the
+/// start's local level (grey): no direction of a scene is black,
 /// and a texel the data drive to zero has no colour, which a mirror shows
 /// 90 degrees off (the dark ring a solve leaves around a light sharper
 /// than the probe's lobes resolve). At the true pose of the suite's 18
@@ -329,14 +332,14 @@ const DARK_LEVEL: f64 = 0.05;
 /// 4.67 / 0.79 / 0.55 -> 4.30 / 0.78 / 0.55 deg mirror / shiny / diffuse;
 /// with a coarse-to-fine final solve at smoothness 1e-3, 4.58 -> 4.46 in
 /// mirror at 2 % and 4.45 at 5 %.
-const FLOOR_OF_LEVEL: f64 = 0.02;
+pub const FLOOR_OF_LEVEL: f64 = 0.02;
 
 /// Solves `min_x>=0 sum_p w_p |A x - b_p|^2 / sum w + lambda R(x)` where
 /// `R` penalises squared differences of neighbouring texels (area-weighted,
 /// relative to the local level of the start `x0`, and divided by the
 /// target's mean square so that `lambda` is scale-free): texels the probe
-/// sees poorly are filled from confident neighbours. With relative
-/// smoothness the bound is [`FLOOR_OF_LEVEL`] of that level, not 0.
+/// sees poorly are filled from confident neighbours. The bound is
+/// `floor_of_level` times that level.
 /// Returns the env map (texel-major RGB) and the L-BFGS evaluation count.
 pub fn solve(
     transport: &Transport,
@@ -435,11 +438,9 @@ pub fn solve(
         f
     };
     let n = transport.unknowns();
-    let floor_of_level = match settings.relative_smoothness {
-        true => FLOOR_OF_LEVEL,
-        false => 0.0,
-    };
-    let lower: Vec<f64> = (0..n).map(|k| floor_of_level * level[k / 3] / scale[k]).collect();
+    let lower: Vec<f64> = (0..n)
+        .map(|k| settings.floor_of_level * level[k / 3] / scale[k])
+        .collect();
     let y0 = x0
         .iter()
         .zip(&scale)
@@ -583,6 +584,7 @@ mod tests {
             LightingSolve {
                 smoothness: 0.0,
                 relative_smoothness: false,
+                floor_of_level: 0.0,
                 max_iters,
             },
             &vec![1.0; w * h * 3],
@@ -594,9 +596,9 @@ mod tests {
     }
 
     #[test]
-    fn relative_smoothness_keeps_a_texel_the_data_drive_dark_above_the_floor() {
-        // One texel of the truth is black: the absolute solve recovers it,
-        // the relative one stops at the floor of the start's level (1).
+    fn a_floor_keeps_a_texel_the_data_drive_dark_above_it() {
+        // One texel of the truth is black: without a floor the solve
+        // recovers it, with one it stops at the floor of the start's level (1).
         let (w, h) = (8, 4);
         let truth: Vec<f64> = (0..w * h * 3).map(|i| if i / 3 == 9 { 0.0 } else { 1.0 }).collect();
         let uv: Vec<Vec2> = (0..w * h)
@@ -606,10 +608,11 @@ mod tests {
         let transport = Transport::new(&segment, &uv, &vec![[1.0; 3]; uv.len()], uv.len(), w, h);
         let mut target = vec![[0.0; 3]; uv.len()];
         transport.apply(&truth, &mut target);
-        let dark = |relative_smoothness: bool| {
+        let dark = |floor_of_level: f64| {
             let settings = LightingSolve {
                 smoothness: 1e-9,
-                relative_smoothness,
+                relative_smoothness: true,
+                floor_of_level,
                 max_iters: 500,
             };
             let (x, _) = solve(
@@ -621,11 +624,11 @@ mod tests {
             );
             [x[27], x[28], x[29]]
         };
-        for v in dark(false) {
-            assert!(v.abs() < 1e-3, "absolute: {v}");
+        for v in dark(0.0) {
+            assert!(v.abs() < 1e-3, "no floor: {v}");
         }
-        for v in dark(true) {
-            assert!((v - FLOOR_OF_LEVEL).abs() < 1e-3, "relative: {v}");
+        for v in dark(FLOOR_OF_LEVEL) {
+            assert!((v - FLOOR_OF_LEVEL).abs() < 1e-3, "floor: {v}");
         }
     }
 

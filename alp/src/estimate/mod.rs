@@ -647,10 +647,9 @@ fn fit_lighting(
     // join their pixels (averaged over the passes). With MIS a hit has two
     // light samples (the lying studio can at its true pose, 64 spp: 999 MB
     // at most with one pass's hits as many as without, 782 MB with half).
-    let strategies = 1 + sampling.env.is_some() as usize;
     let passes = settings
         .spp
-        .div_ceil(spp_per_pass(strategies * photo.mask.count()))
+        .div_ceil(spp_per_pass(sampling.strategies() * photo.mask.count()))
         .max(1);
     let mut reference: Option<PrimaryHits> = None;
     let mut row = Vec::new();
@@ -732,6 +731,10 @@ fn fit_lighting(
     let solve_settings = LightingSolve {
         smoothness,
         relative_smoothness: purpose == LightingPurpose::Output,
+        floor_of_level: match purpose {
+            LightingPurpose::Output => lighting::FLOOR_OF_LEVEL,
+            LightingPurpose::Search => 0.0,
+        },
         max_iters: 300,
     };
     let at = |(w, h): (usize, usize)| Transport::new(&segment, &uv, &throughput, hits.pixels.len(), w, h);
@@ -1594,8 +1597,7 @@ pub fn estimate_with_progress(
         None => LightSampling::BSDF,
     }
     .with_interreflection();
-    let strategies = 1 + sampler.is_some() as usize;
-    let final_spp = final_spp(settings.spp_final, photo.mask.count(), strategies);
+    let final_spp = final_spp(settings.spp_final, photo.mask.count(), sampling.strategies());
     let final_settings = RenderSettings {
         spp: final_spp,
         seed: settings.seed.wrapping_add(77),
