@@ -186,17 +186,12 @@ const TWIN_LEAN_DEG: f32 = 10.0;
 /// [`TWIN_LEAN_DEG`] towards and away from the camera, each also end for
 /// end.
 pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Vec<Pose> {
-    let (lo, hi) = mesh.bounds();
-    let view = (pose.transform_point(0.5 * (lo + hi)) - camera.origin).normalize();
-    let axis = (pose.rotation * Vec3::Y).normalize();
+    let (axis, view, tip) = lean_frame(pose, mesh, camera);
     let lean = axis.dot(view).clamp(-1.0, 1.0).asin();
     let leans = match lean.abs() < UPRIGHT_LEAN_DEG.to_radians() {
         true => vec![TWIN_LEAN_DEG.to_radians(), -TWIN_LEAN_DEG.to_radians()],
         false => vec![-lean],
     };
-    // About `axis x view`, a positive angle leans the axis towards the view
-    // ray (any axis square to the probe's, for an axis along the ray).
-    let tip = axis.cross(view).normalize_or(axis.any_orthonormal_vector());
     let end_for_end = |rotation: Quat| rotation * Quat::from_rotation_x(std::f32::consts::PI);
     let mut rotations = vec![end_for_end(pose.rotation)];
     for to in leans {
@@ -207,6 +202,24 @@ pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Vec<Pose> {
         .into_iter()
         .map(|rotation| rotated(pose, mesh, rotation))
         .collect()
+}
+
+/// The probe's axis, the view ray to the centre of its bounding box, and
+/// `axis x view`, about which a positive angle leans the axis towards the
+/// view ray (any axis square to the probe's, for an axis along the ray).
+fn lean_frame(pose: &Pose, mesh: &Mesh, camera: &Camera) -> (Vec3, Vec3, Vec3) {
+    let (lo, hi) = mesh.bounds();
+    let view = (pose.transform_point(0.5 * (lo + hi)) - camera.origin).normalize();
+    let axis = (pose.rotation * Vec3::Y).normalize();
+    (axis, view, axis.cross(view).normalize_or(axis.any_orthonormal_vector()))
+}
+
+/// `pose` leaned by `deg` towards the camera's view ray (see
+/// [`lean_frame`]) about the centre of its bounding box: the turn of the
+/// axis that the outline tells least.
+pub fn leaned(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
+    let (_, _, tip) = lean_frame(pose, mesh, camera);
+    rotated(pose, mesh, Quat::from_axis_angle(tip, deg.to_radians()) * pose.rotation)
 }
 
 /// `pose` with the orientation `rotation`, the centre of the probe's
@@ -381,5 +394,25 @@ mod tests {
         assert!((turned.rotation * Vec3::Y - pose.rotation * Vec3::Y).length() < 1e-5);
         let side = (turned.rotation * Vec3::X).dot(pose.rotation * Vec3::Z);
         assert!((side.abs() - 1.0).abs() < 1e-5, "a quarter turn: {side}");
+    }
+
+    #[test]
+    fn a_lean_tips_the_axis_towards_the_view_ray_about_the_probe_s_centre() {
+        let probe = SodaCan::default().build();
+        let camera = camera(0.06, 0.06);
+        let pose = Pose::new(Quat::from_rotation_y(0.7), 1.0, Vec3::new(0.01, 0.0, 0.0));
+        let (lo, hi) = probe.mesh.bounds();
+        let centre = pose.transform_point(0.5 * (lo + hi));
+        let view = (centre - camera.origin).normalize();
+        let axis_to_view = |p: &Pose| (p.rotation * Vec3::Y).dot(view).asin().to_degrees();
+        for deg in [-0.3f32, 0.6] {
+            let leaned = leaned(&pose, &probe.mesh, &camera, deg);
+            assert!((leaned.transform_point(0.5 * (lo + hi)) - centre).length() < 1e-6);
+            let tipped = axis_to_view(&leaned) - axis_to_view(&pose);
+            assert!(
+                (tipped - deg).abs() < 1e-3,
+                "leaned {deg}: the axis tipped {tipped} deg towards the view ray"
+            );
+        }
     }
 }
