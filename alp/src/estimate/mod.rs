@@ -1607,9 +1607,10 @@ pub fn estimate_with_progress(
     let (pose, pilot) = match settings.spp_pilot {
         0 => (pose, None),
         _ => {
-            // A leaned pose must beat the searched one by the margin.
+            // A leaned pose must beat the searched one by the margin. Only
+            // the kept pose's map is kept (not its transport).
             let (fit, centre) = pilot_at(&pose, &mut phases, "lighting_pilot")?;
-            let mut kept = (pose, fit, centre + settings.lean_margin_db);
+            let mut kept = (pose, fit.env, centre + settings.lean_margin_db);
             let step = settings.lean_step_deg;
             if settings.known_pose.is_none() && step > 0.0 {
                 phases.expect_more(3);
@@ -1617,7 +1618,7 @@ pub fn estimate_with_progress(
                     let candidate = init::leaned(&pose, &probe.asset.mesh, &photo.camera, deg);
                     let (fit, score) = pilot_at(&candidate, phases, "lighting_lean")?;
                     if score > kept.2 {
-                        kept = (candidate, fit, score);
+                        kept = (candidate, fit.env, score);
                     }
                     Ok(score)
                 };
@@ -1631,7 +1632,7 @@ pub fn estimate_with_progress(
                     false => phases.expect_fewer(1),
                 }
             }
-            (kept.0, Some(kept.1.env))
+            (kept.0, Some(kept.1))
         }
     };
     let t2 = Instant::now();
