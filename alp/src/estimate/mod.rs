@@ -649,6 +649,13 @@ struct LightingFit {
     evaluations: usize,
 }
 
+impl LightingFit {
+    /// The re-render's PSNR over the data pixels.
+    fn psnr_db(&self) -> f64 {
+        psnr(&self.rendered, &self.target, &self.weight)
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn fit_lighting(
     probe: &Probe,
@@ -1378,7 +1385,7 @@ fn search_pose(
             &LightSampling::BSDF,
             None,
         )?;
-        let score = psnr(&coarse.rendered, &coarse.target, &coarse.weight);
+        let score = coarse.psnr_db();
         let ranking = lighting_report("lighting_ranking", &coarse, t1, score);
         let account = StartReport {
             axis: a,
@@ -1479,7 +1486,7 @@ fn search_pose(
             &LightSampling::BSDF,
             start,
         )?;
-        let score = psnr(&fit.rendered, &fit.target, &fit.weight);
+        let score = fit.psnr_db();
         phases.push(lighting_report("lighting", &fit, t1, score));
         Ok(fit)
     };
@@ -1600,7 +1607,7 @@ pub fn estimate_with_progress(
             &LightSampling::BSDF.with_interreflection(),
             None,
         )?;
-        let psnr_db = psnr(&fit.rendered, &fit.target, &fit.weight);
+        let psnr_db = fit.psnr_db();
         phases.push(lighting_report(name, &fit, t1, psnr_db));
         Ok((fit, psnr_db))
     };
@@ -1662,7 +1669,7 @@ pub fn estimate_with_progress(
         &sampling,
         pilot.as_deref(),
     )?;
-    let final_psnr = psnr(&fit.rendered, &fit.target, &fit.weight);
+    let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2, final_psnr));
     let env = env_from_texels(&lighting::resample(&fit.env, work, (out_w, out_h)), out_w, out_h)?;
     let confidence: Vec<f64> = fit.transport.confidence().iter().flat_map(|&c| [c as f64; 3]).collect();
