@@ -32,11 +32,15 @@
 //! plus the mask terms) with the lighting fixed, and the lighting by the
 //! linear solve at the new pose (exact for that pose, which thousands of
 //! noisy Adam steps are not).
-//! The map is a final solve at more samples per pixel, with the output's
-//! weighting (`LightingPurpose::Output`), coarse to fine from a constant
-//! map (started from the search's map, whose small pose errors it
-//! inherits, the mirror sphere's error on five scenes was 10.4 deg against
-//! 8.9).
+//! The map: a *pilot* solve from BRDF samples with the output's weighting
+//! (`LightingPurpose::Output`), coarse to fine from a constant map
+//! (started from the search's map, whose small pose errors it inherits,
+//! the mirror sphere's error on five scenes was 10.4 deg against 8.9);
+//! the *lean* line search (`lean_search`: the lean of the axis towards the
+//! view ray, which the outline tells least, scored by the weighted error
+//! of the lighting solved at each lean with MIS guided by the pilot map);
+//! then the *final* solve at more samples per pixel, MIS guided by the
+//! kept lean's map and started from it.
 //!
 //! The env map's working resolution follows what the probe can resolve: its
 //! smallest roughness sets the narrowest lobe (alpha = r^2 radians wide),
@@ -141,23 +145,35 @@ pub struct Settings {
     pub spp_pilot: u32,
     /// The step (degrees) of a line search over the lean of the searched
     /// pose towards the view ray (`init::leaned`, the turn of the axis the
-    /// outline tells least), scored by the pilot map's re-render PSNR:
-    /// leans of -step and +step, then the vertex of the parabola through
-    /// the three scores (within two steps). 0: no search; the pose is kept
-    /// when the pose is known. On the suite's 18 Mitsuba twins (default
-    /// quality, step 0.3): the axis error of every upright can fell from
-    /// 0.27-0.31 to 0.04-0.07 deg; with no margin 4.89 / 1.11 / 0.75 ->
-    /// 4.67 / 1.04 / 0.87 deg mirror / shiny / diffuse (a tilted courtyard
-    /// can's diffuse 0.43 -> 2.51 on a gain of 0.11 dB), with a margin of
-    /// 0.3 dB 4.73 / 1.01 / 0.75 (the lying courtyard cap still leaned the
-    /// wrong way on a gain of 0.58 dB: 5.10 -> 6.32 in mirror); wall median
-    /// 4.76 -> 5.55 s. On the suite's own 18 scenes with the margin: 5.10 /
-    /// 1.11 / 0.76 -> 4.99 / 1.02 / 0.75, wall median 4.57 -> 5.87 s (a
-    /// large cap's pilot fits take 0.6 s each).
+    /// outline tells least; see `lean_search`): leans of 0 and of a step
+    /// either way, steps doubling while the score rises (up to
+    /// `lean_reach_deg`), then the vertex of the parabola through the best
+    /// three. Each lean is scored by the data term's weighted error (dB)
+    /// of the lighting solved there, from the pilot map, with MIS guided by
+    /// it (`spp_lean`). 0: no search; the pose is kept when it is known.
+    /// On the suite's 18 Mitsuba twins (default quality, step 0.3): 4.89 /
+    /// 1.11 / 0.75 deg mirror / shiny / diffuse without the search; 4.73 /
+    /// 1.01 / 0.75 with the earlier one (leans of 0.3 either way and the
+    /// vertex, within two steps, scored by the pilot's own PSNR: it leaned
+    /// the lying courtyard cap the wrong way, 5.10 -> 6.32 in mirror, on a
+    /// gain of 0.58 dB, and the lying studio can too little, its axis 0.70
+    /// deg off); 4.68 / 0.99 / 0.65 with this search scored by PSNR (a
+    /// tilted sunset cap leaned wrong: a sun's highlight is most of the
+    /// squared error, and it moves with the lean); 4.50 / 0.89 / 0.59 by
+    /// the weighted error (the lying studio can's axis 0.70 -> 0.17 deg,
+    /// the lying courtyard cap's 0.47 -> 0.09, the mean axis error 0.21 ->
+    /// 0.13 deg). The gains of the leans kept were 0.57 to 5.1 dB, of
+    /// those not kept 0.21 at most.
     pub lean_step_deg: f32,
-    /// The PSNR (dB) by which a leaned pose must beat the searched one:
-    /// the pilot's samples move with the pose, and a small gain is noise.
+    /// The score (dB) by which a leaned pose must beat the searched one:
+    /// the leans' samples move with the pose, and a small gain is noise.
     pub lean_margin_db: f64,
+    /// How far (degrees) the lean search may lean the searched pose either way.
+    pub lean_reach_deg: f32,
+    /// Samples per pixel (per strategy) of each lean's lighting solve. At
+    /// 8 rather than 16 on the suite's 18 Mitsuba twins: 4.85 / 1.17 /
+    /// 0.85 deg against 4.68 / 0.99 / 0.65 (both scored by PSNR).
+    pub spp_lean: u32,
     /// Samples per pixel of the final lighting solve (per strategy: with
     /// a pilot, each hit has a BRDF and an env-map sample). BRDF samples
     /// alone, the studio can at its true pose: 12.2/2.0/2.7 deg at 64,
@@ -210,10 +226,10 @@ impl Settings {
             Quality::Default => (yaws(8), 3, 50, 0, 20, 2),
             Quality::Best => (yaws(12), 4, 100, 0, 40, 4),
         };
-        let (spp_pilot, spp_final, lean_step_deg) = match quality {
-            Quality::Fast => (8, 8, 0.0),
-            Quality::Default => (16, 64, 0.3),
-            Quality::Best => (32, 128, 0.3),
+        let (spp_pilot, spp_lean, spp_final, lean_step_deg) = match quality {
+            Quality::Fast => (8, 8, 8, 0.0),
+            Quality::Default => (16, 16, 64, 0.3),
+            Quality::Best => (32, 32, 128, 0.3),
         };
         Settings {
             quality,
@@ -228,6 +244,8 @@ impl Settings {
             spp_pilot,
             lean_step_deg,
             lean_margin_db: 0.3,
+            lean_reach_deg: 2.4,
+            spp_lean,
             spp_final,
             working_height: None,
             smoothness: 3e-4,
@@ -653,6 +671,17 @@ impl LightingFit {
     /// The re-render's PSNR over the data pixels.
     fn psnr_db(&self) -> f64 {
         psnr(&self.rendered, &self.target, &self.weight)
+    }
+
+    /// The solved map, the rest dropped.
+    fn into_map(self) -> Vec<f64> {
+        self.env
+    }
+
+    /// The data term's mean weighted squared error (what the solve minimises
+    /// besides its smoothness).
+    fn weighted_sq_error(&self) -> f64 {
+        mean_weighted_sq_error(&self.rendered, &self.target, &self.weight)
     }
 }
 
@@ -1164,15 +1193,15 @@ fn fit_pose_to_image(
 }
 
 /// A lighting solve's account.
-fn lighting_report(name: &str, fit: &LightingFit, started: Instant, psnr_db: f64) -> PhaseReport {
+fn lighting_report(name: &str, fit: &LightingFit, started: Instant) -> PhaseReport {
     PhaseReport {
         name: name.into(),
         iterations: 0,
         evaluations: fit.evaluations,
         wall_s: started.elapsed().as_secs_f64(),
-        loss: Default::default(),
+        loss: [("data_weighted_sq_error".to_string(), fit.weighted_sq_error())].into(),
         per_iteration: Vec::new(),
-        psnr_db: Some(psnr_db),
+        psnr_db: Some(fit.psnr_db()),
         pose: None,
         resident_mb: resident_mb(),
     }
@@ -1385,15 +1414,14 @@ fn search_pose(
             &LightSampling::BSDF,
             None,
         )?;
-        let score = coarse.psnr_db();
-        let ranking = lighting_report("lighting_ranking", &coarse, t1, score);
+        let ranking = lighting_report("lighting_ranking", &coarse, t1);
         let account = StartReport {
             axis: a,
             yaw_deg: yaw,
             refinement,
             silhouette_loss: loss,
             refitted: refit.is_some(),
-            psnr_db: score,
+            psnr_db: coarse.psnr_db(),
             rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
             relative_error: mean_weighted_sq_error(&coarse.rendered, &coarse.target, &coarse.weight),
         };
@@ -1486,8 +1514,7 @@ fn search_pose(
             &LightSampling::BSDF,
             start,
         )?;
-        let score = fit.psnr_db();
-        phases.push(lighting_report("lighting", &fit, t1, score));
+        phases.push(lighting_report("lighting", &fit, t1));
         Ok(fit)
     };
     if settings.rounds > 0 {
@@ -1509,6 +1536,106 @@ fn search_pose(
         axes,
         starts,
         chosen,
+    })
+}
+
+/// The lean (degrees) that maximises `score` within `reach` either way,
+/// by a line search: leans of 0 and of `step` either way; while one side
+/// rises, steps doubling that way; then the vertex of the parabola through
+/// the best lean tried and its neighbours, where it is a maximum. Returns
+/// every (lean, score) tried, in order.
+fn line_search_max(step: f32, reach: f32, mut score: impl FnMut(f32) -> Result<f64>) -> Result<Vec<(f32, f64)>> {
+    let mut tried = vec![(0.0, score(0.0)?), (-step, score(-step)?), (step, score(step)?)];
+    let (centre, minus, plus) = (tried[0].1, tried[1].1, tried[2].1);
+    if minus.max(plus) > centre {
+        let (mut x, mut best) = match plus >= minus {
+            true => (step, plus),
+            false => (-step, minus),
+        };
+        while (2.0 * x).abs() <= reach {
+            let next = score(2.0 * x)?;
+            tried.push((2.0 * x, next));
+            if next <= best {
+                break;
+            }
+            (x, best) = (2.0 * x, next);
+        }
+    }
+    let mut sorted = tried.clone();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let top = (0..sorted.len()).fold(0, |b, k| if sorted[k].1 > sorted[b].1 { k } else { b });
+    if top > 0 && top + 1 < sorted.len() {
+        let ((x1, f1), (x2, f2), (x3, f3)) = (sorted[top - 1], sorted[top], sorted[top + 1]);
+        let (a, b) = ((x2 - x1) as f64, (x2 - x3) as f64);
+        let denominator = a * (f2 - f3) - b * (f2 - f1);
+        // The best lean tried is above both neighbours: the parabola is concave.
+        if denominator.abs() > 0.0 {
+            let vertex = x2 as f64 - 0.5 * (a * a * (f2 - f3) - b * b * (f2 - f1)) / denominator;
+            let vertex = (vertex as f32).clamp(x1, x3);
+            tried.push((vertex, score(vertex)?));
+        }
+    }
+    Ok(tried)
+}
+
+/// The searched `pose` leaned towards the view ray (`init::leaned`: the
+/// turn of the axis the outline tells least) by the line search
+/// [`line_search_max`] of [`Settings::lean_step_deg`], scored by the data
+/// term's weighted error (dB) of the lighting solved at each lean from the
+/// pilot map `pilot` with MIS guided by it ([`Settings::spp_lean`]): the
+/// weighted error, not the PSNR, which a sun's highlight dominates. A
+/// leaned pose is kept only if it beats the searched one by
+/// [`Settings::lean_margin_db`]. Returns the kept pose and its map.
+#[allow(clippy::too_many_arguments)]
+fn lean_search(
+    probe: &Probe,
+    photo: &Photo,
+    pose: &Pose,
+    pilot: &[f64],
+    work: (usize, usize),
+    clipped: &[bool],
+    settings: &Settings,
+    phases: &mut PhaseLog,
+) -> Result<(Pose, Vec<f64>)> {
+    let sampler = EnvSampler::new(&env_from_texels(pilot, work.0, work.1)?);
+    let sampling = LightSampling::mis(&sampler).with_interreflection();
+    let render = RenderSettings {
+        spp: final_spp(settings.spp_lean, photo.mask.count(), sampling.strategies()),
+        seed: settings.seed.wrapping_add(79),
+    };
+    // The searched pose's map, and the best lean's (not their transports).
+    let mut centre: Option<Vec<f64>> = None;
+    let mut best: Option<(f32, Vec<f64>, f64)> = None;
+    let tried = line_search_max(settings.lean_step_deg, settings.lean_reach_deg, |deg| {
+        let t1 = Instant::now();
+        let candidate = init::leaned(pose, &probe.asset.mesh, &photo.camera, deg);
+        let fit = fit_lighting(
+            probe,
+            photo,
+            &candidate,
+            work,
+            &render,
+            clipped,
+            settings.smoothness,
+            LightingPurpose::Output,
+            &sampling,
+            Some(pilot),
+        )?;
+        let score = -10.0 * fit.weighted_sq_error().log10();
+        phases.expect_more(1);
+        phases.push(lighting_report("lighting_lean", &fit, t1));
+        if centre.is_none() {
+            centre = Some(fit.env.clone());
+        }
+        if best.as_ref().is_none_or(|b| score > b.2) {
+            best = Some((deg, fit.env, score));
+        }
+        Ok(score)
+    })?;
+    let (deg, map, score) = best.expect("the line search scores the searched pose");
+    Ok(match score > tried[0].1 + settings.lean_margin_db {
+        true => (init::leaned(pose, &probe.asset.mesh, &photo.camera, deg), map),
+        false => (*pose, centre.expect("the searched pose is scored first")),
     })
 }
 
@@ -1587,59 +1714,39 @@ pub fn estimate_with_progress(
     // Mitsuba twins at the true pose, with LitShares' weights, 5.26 / 1.11
     // / 0.93 -> 5.15 / 1.04 / 0.90 deg mirror / shiny / diffuse (the
     // upright courtyard can 6.19 / 1.39 / 0.46 -> 5.36 / 1.05 / 0.48). A
-    // pilot map solved from BRDF samples then guides the final transport's
-    // env-map samples (MIS; see Settings::spp_pilot), and starts its solve.
-    let pilot_settings = RenderSettings {
-        spp: final_spp(settings.spp_pilot, photo.mask.count(), 1),
-        seed: settings.seed.wrapping_add(78),
-    };
-    let pilot_at = |pose: &Pose, phases: &mut PhaseLog, name: &str| -> Result<(LightingFit, f64)> {
-        let t1 = Instant::now();
-        let fit = fit_lighting(
-            &probe,
-            photo,
-            pose,
-            work,
-            &pilot_settings,
-            &clipped,
-            settings.smoothness,
-            LightingPurpose::Output,
-            &LightSampling::BSDF.with_interreflection(),
-            None,
-        )?;
-        let psnr_db = fit.psnr_db();
-        phases.push(lighting_report(name, &fit, t1, psnr_db));
-        Ok((fit, psnr_db))
-    };
+    // pilot map solved from BRDF samples guides the env-map samples (MIS;
+    // see Settings::spp_pilot) of the lean search's solves and starts them;
+    // the kept lean's map guides and starts the final solve.
     let (pose, pilot) = match settings.spp_pilot {
         0 => (pose, None),
-        _ => {
-            // A leaned pose must beat the searched one by the margin. Only
-            // the kept pose's map is kept (not its transport).
-            let (fit, centre) = pilot_at(&pose, &mut phases, "lighting_pilot")?;
-            let mut kept = (pose, fit.env, centre + settings.lean_margin_db);
-            let step = settings.lean_step_deg;
-            if settings.known_pose.is_none() && step > 0.0 {
-                phases.expect_more(3);
-                let mut lean = |deg: f32, phases: &mut PhaseLog| -> Result<f64> {
-                    let candidate = init::leaned(&pose, &probe.asset.mesh, &photo.camera, deg);
-                    let (fit, score) = pilot_at(&candidate, phases, "lighting_lean")?;
-                    if score > kept.2 {
-                        kept = (candidate, fit.env, score);
-                    }
-                    Ok(score)
-                };
-                let (minus, plus) = (lean(-step, &mut phases)?, lean(step, &mut phases)?);
-                let curvature = minus - 2.0 * centre + plus;
-                match curvature < 0.0 {
-                    true => {
-                        let vertex = (0.5 * (minus - plus) / curvature) as f32 * step;
-                        lean(vertex.clamp(-2.0 * step, 2.0 * step), &mut phases)?;
-                    }
-                    false => phases.expect_fewer(1),
+        spp => {
+            let t1 = Instant::now();
+            let pilot_settings = RenderSettings {
+                spp: final_spp(spp, photo.mask.count(), 1),
+                seed: settings.seed.wrapping_add(78),
+            };
+            let fit = fit_lighting(
+                &probe,
+                photo,
+                &pose,
+                work,
+                &pilot_settings,
+                &clipped,
+                settings.smoothness,
+                LightingPurpose::Output,
+                &LightSampling::BSDF.with_interreflection(),
+                None,
+            )?;
+            phases.push(lighting_report("lighting_pilot", &fit, t1));
+            // The pilot's transport goes before the leans' are built.
+            let map = fit.into_map();
+            match settings.known_pose.is_none() && settings.lean_step_deg > 0.0 {
+                true => {
+                    let (pose, map) = lean_search(&probe, photo, &pose, &map, work, &clipped, settings, &mut phases)?;
+                    (pose, Some(map))
                 }
+                false => (pose, Some(map)),
             }
-            (kept.0, Some(kept.1))
         }
     };
     let t2 = Instant::now();
@@ -1670,7 +1777,7 @@ pub fn estimate_with_progress(
         pilot.as_deref(),
     )?;
     let final_psnr = fit.psnr_db();
-    phases.push(lighting_report("lighting_final", &fit, t2, final_psnr));
+    phases.push(lighting_report("lighting_final", &fit, t2));
     let env = env_from_texels(&lighting::resample(&fit.env, work, (out_w, out_h)), out_w, out_h)?;
     let confidence: Vec<f64> = fit.transport.confidence().iter().flat_map(|&c| [c as f64; 3]).collect();
     let confidence = env_from_texels(&lighting::resample(&confidence, work, (out_w, out_h)), out_w, out_h)?;
@@ -1732,6 +1839,36 @@ mod tests {
         ));
         // Colours that tie but relative errors 3e-3 apart: a pattern turned.
         assert!(!renders_alike(&start(5.0, 0.300), &start(5.01, 0.3009)));
+    }
+
+    /// The leans `line_search_max` tries on `score` (step 0.3, reach 2.4).
+    fn leans_tried(score: impl Fn(f32) -> f64) -> Vec<(f32, f64)> {
+        line_search_max(0.3, 2.4, |x| Ok(score(x))).unwrap()
+    }
+
+    /// The best lean tried.
+    fn best(tried: &[(f32, f64)]) -> f32 {
+        tried.iter().fold(tried[0], |b, &t| if t.1 > b.1 { t } else { b }).0
+    }
+
+    #[test]
+    fn the_lean_search_finds_a_peak_near_the_start_or_walks_to_one_further_off_but_not_beyond_its_reach() {
+        // A peak within a step: 0 and a step either way, then the vertex.
+        let tried = leans_tried(|x| -(x as f64 - 0.1).powi(2));
+        assert_eq!(tried.len(), 4);
+        assert!((best(&tried) - 0.1).abs() < 1e-5, "{tried:?}");
+        // A peak 1 deg off: steps doubling towards it until the score falls
+        // (-0.6, -1.2, -2.4), then the vertex.
+        let tried = leans_tried(|x| -(x as f64 + 1.0).powi(2));
+        let leans: Vec<f32> = tried.iter().map(|t| t.0).collect();
+        assert_eq!(&leans[..6], &[0.0, -0.3, 0.3, -0.6, -1.2, -2.4]);
+        assert!((best(&tried) + 1.0).abs() < 1e-5, "{tried:?}");
+        // A peak beyond the reach: the search stops at the reach.
+        let tried = leans_tried(|x| -(x as f64 - 5.0).powi(2));
+        assert!(tried.iter().all(|t| t.0.abs() <= 2.4), "{tried:?}");
+        assert_eq!(best(&tried), 2.4);
+        // A flat score: nothing but the start and a step either way.
+        assert_eq!(leans_tried(|_| 1.0).len(), 3);
     }
 
     #[test]
