@@ -142,6 +142,37 @@ fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
         "a small probe takes every sample"
     );
     assert_eq!(result.report.chosen_start, None);
+    assert!(result.report.lean.is_none(), "a known pose is not leaned");
     let psnr = result.report.psnr_db;
     assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");
+}
+
+#[test]
+fn the_lean_search_accounts_for_every_lean_and_keeps_the_best_only_by_its_margin() {
+    let (probe, _, photo, mut settings) = scene();
+    settings.lean_step_deg = 0.3;
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    let lean = result.report.lean.expect("a lean search");
+    let tried = &lean.tried;
+    assert_eq!(tried[0].0, 0.0, "the searched pose is scored first");
+    assert!(tried.len() >= 3, "{tried:?}");
+    assert!(tried.iter().all(|t| t.0.abs() <= settings.lean_reach_deg), "{tried:?}");
+    let best = tried.iter().fold(tried[0], |b, &t| if t.1 > b.1 { t } else { b });
+    match best.1 > tried[0].1 + settings.lean_margin_db {
+        true => assert_eq!(lean.kept_deg, best.0, "{tried:?}"),
+        false => assert_eq!(lean.kept_deg, 0.0, "{tried:?}"),
+    }
+    let phases: Vec<_> = result
+        .report
+        .phases
+        .iter()
+        .filter(|p| p.name == "lighting_lean")
+        .collect();
+    let scored = tried.iter().filter(|t| t.1.is_finite()).count();
+    assert_eq!(phases.len(), scored, "one phase per lean scored");
+    assert!(
+        phases
+            .iter()
+            .all(|p| p.pose.is_some() && p.loss.contains_key("data_weighted_sq_error"))
+    );
 }

@@ -437,6 +437,8 @@ pub struct Report {
     pub starts: Vec<StartReport>,
     /// The index of the start kept (none when the pose was given).
     pub chosen_start: Option<usize>,
+    /// The lean line search (none when the pose was given or at fast quality).
+    pub lean: Option<LeanReport>,
     /// Working env map resolution (width, height) and why.
     pub working_resolution: (usize, usize),
     /// The smallest roughness of the probe, which set it.
@@ -453,6 +455,17 @@ pub struct Report {
     pub psnr_db: f64,
     /// Total wall time, seconds.
     pub wall_s: f64,
+}
+
+/// The lean line search's account (see `Settings::lean_step_deg`).
+#[derive(Clone, Debug, Serialize)]
+pub struct LeanReport {
+    /// Every lean tried (degrees towards the view ray) and its score (the
+    /// data term's weighted error, -dB: higher is better; minus infinity,
+    /// written as null, where it could not be scored), in order.
+    pub tried: Vec<(f32, f64)>,
+    /// The lean kept (0: the searched pose).
+    pub kept_deg: f32,
 }
 
 /// The estimate.
@@ -1592,7 +1605,8 @@ fn line_search_max(step: f32, reach: f32, mut score: impl FnMut(f32) -> Result<f
 /// pilot map `pilot` with MIS guided by it ([`Settings::spp_lean`]): the
 /// weighted error, not the PSNR, which a sun's highlight dominates. A
 /// leaned pose is kept only if it beats the searched one by
-/// [`Settings::lean_margin_db`]. Returns the kept pose and its map.
+/// [`Settings::lean_margin_db`]. Returns the kept pose, its map and the
+/// search's account.
 #[allow(clippy::too_many_arguments)]
 fn lean_search(
     probe: &Probe,
@@ -1603,7 +1617,7 @@ fn lean_search(
     clipped: &[bool],
     settings: &Settings,
     phases: &mut PhaseLog,
-) -> Result<(Pose, Vec<f64>)> {
+) -> Result<(Pose, Vec<f64>, LeanReport)> {
     let sampler = EnvSampler::new(&env_from_texels(pilot, work.0, work.1)?);
     let sampling = LightSampling::mis(&sampler).with_interreflection();
     let render = RenderSettings {
@@ -1639,7 +1653,10 @@ fn lean_search(
             _ => f64::NEG_INFINITY,
         };
         phases.expect_more(1);
-        phases.push(lighting_report("lighting_lean", &fit, t1));
+        phases.push(PhaseReport {
+            pose: Some(PoseRecord::from(&candidate)),
+            ..lighting_report("lighting_lean", &fit, t1)
+        });
         if centre.is_none() {
             centre = Some(fit.env.clone());
         }
@@ -1649,10 +1666,11 @@ fn lean_search(
         Ok(score)
     })?;
     let (deg, map, score) = best.expect("the line search scores the searched pose");
-    Ok(match score > tried[0].1 + settings.lean_margin_db {
-        true => (init::leaned(pose, &probe.asset.mesh, &photo.camera, deg), map),
-        false => (*pose, centre.expect("the searched pose is scored first")),
-    })
+    let (kept_deg, kept, map) = match score > tried[0].1 + settings.lean_margin_db {
+        true => (deg, init::leaned(pose, &probe.asset.mesh, &photo.camera, deg), map),
+        false => (0.0, *pose, centre.expect("the searched pose is scored first")),
+    };
+    Ok((kept, map, LeanReport { tried, kept_deg }))
 }
 
 /// The phases done so far, each announced as it ends with the count done
@@ -1733,8 +1751,8 @@ pub fn estimate_with_progress(
     // pilot map solved from BRDF samples guides the env-map samples (MIS;
     // see Settings::spp_pilot) of the lean search's solves and starts them;
     // the kept lean's map guides and starts the final solve.
-    let (pose, pilot) = match settings.spp_pilot {
-        0 => (pose, None),
+    let (pose, pilot, lean) = match settings.spp_pilot {
+        0 => (pose, None, None),
         spp => {
             let t1 = Instant::now();
             let pilot_settings = RenderSettings {
@@ -1758,10 +1776,11 @@ pub fn estimate_with_progress(
             let map = fit.into_map();
             match settings.known_pose.is_none() && settings.lean_step_deg > 0.0 {
                 true => {
-                    let (pose, map) = lean_search(&probe, photo, &pose, &map, work, &clipped, settings, &mut phases)?;
-                    (pose, Some(map))
+                    let (pose, map, lean) =
+                        lean_search(&probe, photo, &pose, &map, work, &clipped, settings, &mut phases)?;
+                    (pose, Some(map), Some(lean))
                 }
-                false => (pose, Some(map)),
+                false => (pose, Some(map), None),
             }
         }
     };
@@ -1804,6 +1823,7 @@ pub fn estimate_with_progress(
         axes,
         starts,
         chosen_start: chosen,
+        lean,
         working_resolution: work,
         min_roughness,
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
