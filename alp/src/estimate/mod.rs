@@ -33,9 +33,10 @@
 //! linear solve at the new pose (exact for that pose, which thousands of
 //! noisy Adam steps are not).
 //! The map: a *pilot* solve from BRDF samples with the output's weighting
-//! (`LightingPurpose::Output`), coarse to fine from a constant map
-//! (started from the search's map, whose small pose errors it inherits,
-//! the mirror sphere's error on five scenes was 10.4 deg against 8.9);
+//! (`LightingPurpose::Output`), coarse to fine from a constant map (not
+//! from the search's map, whose small pose errors it would inherit:
+//! started from it, the mirror sphere's error on five scenes was 10.4 deg
+//! against 8.9);
 //! the *lean* line search (`lean_search`: the lean of the axis towards the
 //! view ray, which the outline tells least, scored by the weighted error
 //! of the lighting solved at each lean with MIS guided by the pilot map);
@@ -150,7 +151,8 @@ pub struct Settings {
     /// `lean_reach_deg`), then the vertex of the parabola through the best
     /// three. Each lean is scored by the data term's weighted error (dB)
     /// of the lighting solved there, from the pilot map, with MIS guided by
-    /// it (`spp_lean`). 0: no search; the pose is kept when it is known.
+    /// it (`spp_lean`). 0: no search; none either when the pose is known
+    /// or there is no pilot map (`spp_pilot` 0).
     /// On the suite's 18 Mitsuba twins (default quality, step 0.3): 4.89 /
     /// 1.11 / 0.75 deg mirror / shiny / diffuse without the search; 4.73 /
     /// 1.01 / 0.75 with the earlier one (leans of 0.3 either way and the
@@ -163,7 +165,12 @@ pub struct Settings {
     /// the weighted error (the lying studio can's axis 0.70 -> 0.17 deg,
     /// the lying courtyard cap's 0.47 -> 0.09, the mean axis error 0.21 ->
     /// 0.13 deg). The gains of the leans kept were 0.57 to 5.1 dB, of
-    /// those not kept 0.21 at most.
+    /// those not kept 0.21 at most. Its 4 to 7 solves cost time: wall
+    /// median 5.55 -> 7.83 s (twins) and 5.87 -> 7.81 s (the suite's own
+    /// scenes, where 4.99 / 1.02 / 0.75 -> 4.80 / 0.89 / 0.61). Line
+    /// searches over the lateral position after it (image right, then up,
+    /// 0.25 px steps) took the twins to 4.47 / 0.91 / 0.59 at nearly twice
+    /// the time: not done.
     pub lean_step_deg: f32,
     /// The score (dB) by which a leaned pose must beat the searched one:
     /// the leans' samples move with the pose, and a small gain is noise.
