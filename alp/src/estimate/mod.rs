@@ -163,7 +163,7 @@ pub struct Settings {
     /// tilted sunset cap leaned wrong: a sun's highlight is most of the
     /// squared error, and it moves with the lean); 4.50 / 0.89 / 0.59 by
     /// the weighted error (the lying studio can's axis 0.70 -> 0.17 deg,
-    /// the lying courtyard cap's 0.47 -> 0.09, the mean axis error 0.21 ->
+    /// the lying courtyard cap's 0.47 -> 0.09, the mean axis error 0.22 ->
     /// 0.13 deg). The gains of the leans kept were 0.57 to 5.1 dB, of
     /// those not kept 0.21 at most. Its 4 to 7 solves cost time: wall
     /// median 5.55 -> 7.83 s (twins) and 5.87 -> 7.81 s (the suite's own
