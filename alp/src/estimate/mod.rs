@@ -444,7 +444,8 @@ pub struct Report {
     pub starts: Vec<StartReport>,
     /// The index of the start kept (none when the pose was given).
     pub chosen_start: Option<usize>,
-    /// The lean line search (none when the pose was given or at fast quality).
+    /// The lean line search (none when the pose was given, with no pilot
+    /// map, or with `lean_step_deg` 0, as at fast quality).
     pub lean: Option<LeanReport>,
     /// Working env map resolution (width, height) and why.
     pub working_resolution: (usize, usize),
@@ -703,8 +704,9 @@ impl LightingFit {
         self.env
     }
 
-    /// The data term's mean weighted squared error (what the solve minimises
-    /// besides its smoothness).
+    /// The solve's data term per data pixel and channel: the weighted
+    /// squared error over the pixels of non-zero weight (with the search's
+    /// weights, the mean relative squared error).
     fn weighted_sq_error(&self) -> f64 {
         mean_weighted_sq_error(&self.rendered, &self.target, &self.weight)
     }
@@ -1448,7 +1450,7 @@ fn search_pose(
             refitted: refit.is_some(),
             psnr_db: coarse.psnr_db(),
             rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
-            relative_error: mean_weighted_sq_error(&coarse.rendered, &coarse.target, &coarse.weight),
+            relative_error: coarse.weighted_sq_error(),
         };
         Ok((refit, ranking, account, pose))
     };
