@@ -307,7 +307,7 @@ pub fn resample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec
 
 /// The smoothness prior of a lighting solve: neighbouring texels'
 /// differences, penalised quadratically up to `edge` and linearly beyond.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize)]
 pub struct Smoothness {
     /// Weight of the term (relative to the data term, scale-free).
     pub weight: f64,
