@@ -730,9 +730,11 @@ mod tests {
                 relative: 0.5 + (i % 3) as f64,
             });
         }
-        // Quadratic, and with an edge that leaves some pairs quadratic and
-        // takes others far into the linear part.
-        for edge_sq in [0.0, 0.05] {
+        // Quadratic, and with two edges: the pairs' `q |d|^2 / (3 edge^2)`
+        // runs from 0.005 to 0.9 with the first (near-quadratic pairs to the
+        // bend) and from 0.5 to 90 with the second (the bend to far into
+        // the linear part).
+        for edge_sq in [0.0, 5.0, 0.05] {
             let prior = Prior {
                 pairs: std::mem::take(&mut pairs),
                 lambda: 0.7,
