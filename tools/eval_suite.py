@@ -6,7 +6,7 @@ Python 3 standard library only. Usage (from anywhere):
     python3 tools/eval_suite.py --alp PATH_TO_ALP --work DIR \\
         [--qualities fast,default] [--threads 2] [--scenes N] [--out DIR/results.jsonl] \\
         [--extra-runs default:1:6] [--eval-spp 256] [--sphere] [--only SUBSTR,...] \\
-        [--envmaps assets/envmaps] [--rss auto|time|wait4]
+        [--envmaps assets/envmaps] [--rss auto|time|wait4] [--mask-error PX]
 
 e.g. the full suite (18 scenes, fast + default with 2 threads, default with 1 thread on the
 first 6 scenes; ~30 min on 2 cores):
@@ -37,6 +37,9 @@ What it does:
    rusage of that one child from os.wait4). Estimates run one at a time. The 1-minute load
    average before each run is recorded (load_1m) to show whether something else was running.
    `--extra-runs Q:T:N[,...]` adds runs of quality Q with T threads on the first N scenes only.
+   `--mask-error PX` gives every estimate its scene's mask grown (PX > 0) or shrunk (PX < 0) by
+   |PX| pixels (a disk of that radius; written once to WORK/masks/), as a segmentation errs at the
+   probe's edge; those runs go to runs/SCENE/Q_tT_mask+PX/ and their records carry mask_error_px.
 3. `alp eval --scene S --env env.exr --pose pose.json --spp EVAL_SPP`. Evaluation is cached by
    the SHA-256 of (env.exr, pose.json, scene, spp) in DIR/eval_cache.json, so a byte-identical
    estimate (e.g. the same run with another thread count) is not relit again.
@@ -343,20 +346,101 @@ def success(rec, sphere_mm):
     return rec["rotation_deg"] < SUCCESS_DEG
 
 
+def read_png_gray(path):
+    """(width, height, first-channel bytes row-major) of an 8-bit non-interlaced PNG (grey, grey +
+    alpha, RGB or RGBA): enough for the masks `alp synth` and the Mitsuba twins write."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError("%s: not a PNG file" % path)
+    i, idat, head = 8, b"", None
+    while i < len(data):
+        size, kind = struct.unpack_from(">I4s", data, i)
+        body = data[i + 8:i + 8 + size]
+        if kind == b"IHDR":
+            head = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat += body
+        i += 12 + size
+    w, h, depth, colour, _, _, interlace = head
+    channels = {0: 1, 4: 2, 2: 3, 6: 4}.get(colour)
+    if depth != 8 or channels is None or interlace:
+        raise ValueError("%s: only 8-bit non-interlaced grey/RGB(A) PNGs are read" % path)
+    raw, stride = zlib.decompress(idat), w * channels
+    rows, prev = [], bytearray(stride)
+    for y in range(h):
+        kind, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for x in range(stride):
+            a = line[x - channels] if x >= channels else 0
+            b = prev[x]
+            c = prev[x - channels] if x >= channels else 0
+            if kind == 1:
+                line[x] = (line[x] + a) & 0xFF
+            elif kind == 2:
+                line[x] = (line[x] + b) & 0xFF
+            elif kind == 3:
+                line[x] = (line[x] + (a + b) // 2) & 0xFF
+            elif kind == 4:
+                pa, pb, pc = abs(b - c), abs(a - c), abs(a + b - 2 * c)
+                line[x] = (line[x] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 0xFF
+        rows.append(bytes(line[0::channels]))
+        prev = line
+    return w, h, b"".join(rows)
+
+
+def write_png_gray(path, w, h, grey):
+    """An 8-bit greyscale PNG of `grey` (row-major bytes)."""
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    rows = b"".join(b"\0" + grey[y * w:(y + 1) * w] for y in range(h))
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+                + chunk(b"IDAT", zlib.compress(rows, 9)) + chunk(b"IEND", b""))
+
+
+def perturbed_mask(work, scene_dir, name, px):
+    """The scene's mask grown (px > 0) or shrunk (px < 0) by |px| pixels: a pixel joins (leaves) it
+    when a mask (non-mask) pixel lies within a disk of that radius. Written once to
+    WORK/masks/NAME_mask+PX.png; returns its path."""
+    path = os.path.join(work, "masks", "%s_mask%+d.png" % (name, px))
+    if os.path.exists(path):
+        return path
+    w, h, grey = read_png_gray(os.path.join(scene_dir, "mask.png"))
+    inside = [v > 127 for v in grey]
+    r = abs(px)
+    disk = [(dx, dy) for dy in range(-r, r + 1) for dx in range(-r, r + 1) if dx * dx + dy * dy <= r * r]
+    grow = px > 0
+    out = bytearray(w * h)
+    for y in range(h):
+        for x in range(w):
+            near = any(inside[(y + dy) * w + x + dx] == grow
+                       for dx, dy in disk if 0 <= x + dx < w and 0 <= y + dy < h)
+            out[y * w + x] = 255 if near == grow else 0
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    tmp = path + ".tmp"
+    write_png_gray(tmp, w, h, bytes(out))
+    os.replace(tmp, path)
+    return path
+
+
 def run_one(args, sc, meta, quality, threads, cache):
     scene_dir = os.path.join(args.work, "scenes", sc["name"])
-    est_dir = os.path.join(args.work, "runs", sc["name"], "%s_t%d" % (quality, threads))
+    est_dir = os.path.join(args.work, "runs", sc["name"], "%s_t%d%s" % (
+        quality, threads, "_mask%+d" % args.mask_error if args.mask_error else ""))
     shutil.rmtree(est_dir, ignore_errors=True)
     os.makedirs(os.path.dirname(est_dir), exist_ok=True)
     rec = {"scene": sc["name"], "env": sc["env"], "probe": sc["probe"], "variant": sc["variant"],
            "seed": sc["seed"], "tilted": sc["tilted"], "axis_tilt_deg": round(meta["axis_tilt_deg"], 2),
            "noise": sc["noise"], "exposure_clip": meta.get("exposure_clip"),
            "quality": quality, "threads": threads, "load_1m": round(os.getloadavg()[0], 2),
-           "alp_sha256": args.alp_sha[:12]}
+           "alp_sha256": args.alp_sha[:12], "mask_error_px": args.mask_error}
     with open(os.path.join(scene_dir, "probe.txt")) as f:
         probe = f.read().strip()
+    mask = os.path.join(scene_dir, "mask.png")
+    if args.mask_error:
+        mask = perturbed_mask(args.work, scene_dir, sc["name"], args.mask_error)
     cmd = [args.alp, "estimate", "--image", os.path.join(scene_dir, "image.exr"),
-           "--mask", os.path.join(scene_dir, "mask.png"), "--camera", os.path.join(scene_dir, "camera.json"),
+           "--mask", mask, "--camera", os.path.join(scene_dir, "camera.json"),
            "--probe", probe, "--out", est_dir, "--quality", quality, "--threads", str(threads), "--seed", "0"]
     log = est_dir + ".estimate.log"
     try:
@@ -428,8 +512,10 @@ def summary(records, args, cmdline):
          "time in seconds per image (the whole `alp estimate` process), RSS = max resident set of "
          "`alp estimate`, CPU = its user + system time, max load = the highest 1-minute load average "
          "seen just before a run (the preceding `alp eval`, on 2 threads, adds ~1.5 by itself). "
-         "Rotation columns: the can only (observable turn); axis: can + cap."
-         % (args.alp, args.alp_sha[:12], args.eval_spp, SUCCESS_DEG, SUCCESS_DEG, args.sphere_success_mm), "",
+         "Rotation columns: the can only (observable turn); axis: can + cap.%s"
+         % (args.alp, args.alp_sha[:12], args.eval_spp, SUCCESS_DEG, SUCCESS_DEG, args.sphere_success_mm,
+            " Masks %s by %d px (`--mask-error`)." % ("grown" if args.mask_error > 0 else "shrunk",
+                                                   abs(args.mask_error)) if args.mask_error else ""), "",
          "## Per quality and thread count", "",
          "| quality | threads | scenes | failed | ang. mirror | ang. shiny | ang. diffuse | si-RMSE mirror | "
          "si-RMSE shiny | si-RMSE diffuse | rot. median | rot. mean | axis median | axis mean | "
@@ -521,6 +607,8 @@ def main():
                     "comma-separated strings (after --scenes), e.g. sphere or studio_can")
     ap.add_argument("--sphere-success-mm", type=float, default=3.0)
     ap.add_argument("--envmaps", default=DEFAULT_ENVMAPS)
+    ap.add_argument("--mask-error", type=int, default=0,
+                    help="estimate from each scene's mask grown (> 0) or shrunk (< 0) by this many pixels")
     ap.add_argument("--rss", choices=["auto", "time", "wait4"], default="auto",
                     help="peak memory from `/usr/bin/time -v` (auto: when present) or os.wait4's rusage")
     args = ap.parse_args()
