@@ -148,31 +148,32 @@ fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
 }
 
 #[test]
-fn the_lean_search_accounts_for_every_lean_and_keeps_the_best_only_by_its_margin() {
+fn the_size_and_lean_searches_account_for_every_candidate_and_keep_the_best_only_by_their_margin() {
     let (probe, _, photo, mut settings) = scene();
-    settings.lean_step_deg = 0.3;
+    (settings.size_step_px, settings.lean_step_deg) = (0.5, 0.3);
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
-    let lean = result.report.lean.expect("a lean search");
-    let tried = &lean.tried;
-    assert_eq!(tried[0].0, 0.0, "the searched pose is scored first");
-    assert!(tried.len() >= 3, "{tried:?}");
-    assert!(tried.iter().all(|t| t.0.abs() <= settings.lean_reach_deg), "{tried:?}");
-    let best = tried.iter().fold(tried[0], |b, &t| if t.1 > b.1 { t } else { b });
-    match best.1 > tried[0].1 + settings.lean_margin_db {
-        true => assert_eq!(lean.kept_deg, best.0, "{tried:?}"),
-        false => assert_eq!(lean.kept_deg, 0.0, "{tried:?}"),
+    let searches = [
+        ("lighting_size", result.report.size.as_ref(), settings.size_reach_px),
+        ("lighting_lean", result.report.lean.as_ref(), settings.lean_reach_deg),
+    ];
+    for (phase, search, reach) in searches {
+        let search = search.unwrap_or_else(|| panic!("{phase}: a search"));
+        let tried = &search.tried;
+        assert_eq!(tried[0].0, 0.0, "{phase}: the searched pose is scored first");
+        assert!(tried.len() >= 3, "{phase}: {tried:?}");
+        assert!(tried.iter().all(|t| t.0.abs() <= reach), "{phase}: {tried:?}");
+        let best = tried.iter().fold(tried[0], |b, &t| if t.1 > b.1 { t } else { b });
+        match best.1 > tried[0].1 + settings.search_margin_db {
+            true => assert_eq!(search.kept, best.0, "{phase}: {tried:?}"),
+            false => assert_eq!(search.kept, 0.0, "{phase}: {tried:?}"),
+        }
+        let phases: Vec<_> = result.report.phases.iter().filter(|p| p.name == phase).collect();
+        let scored = tried.iter().filter(|t| t.1.is_finite()).count();
+        assert_eq!(phases.len(), scored, "{phase}: one phase per candidate scored");
+        assert!(
+            phases
+                .iter()
+                .all(|p| p.pose.is_some() && p.loss.contains_key("data_weighted_sq_error"))
+        );
     }
-    let phases: Vec<_> = result
-        .report
-        .phases
-        .iter()
-        .filter(|p| p.name == "lighting_lean")
-        .collect();
-    let scored = tried.iter().filter(|t| t.1.is_finite()).count();
-    assert_eq!(phases.len(), scored, "one phase per lean scored");
-    assert!(
-        phases
-            .iter()
-            .all(|p| p.pose.is_some() && p.loss.contains_key("data_weighted_sq_error"))
-    );
 }

@@ -298,6 +298,32 @@ impl PrimaryHits {
         hits
     }
 
+    /// Keeps the pixels whose row-major index `keep` accepts, with their
+    /// samples in order (a fit that reads a subset of the probe's pixels
+    /// costs in proportion to it). `rays` still counts every ray traced.
+    pub fn retain_pixels(&mut self, keep: impl Fn(u32) -> bool) {
+        let pixel_kept: Vec<bool> = self.pixels.iter().map(|&p| keep(p)).collect();
+        let sample_kept: Vec<bool> = self.segment.iter().map(|&s| pixel_kept[s as usize]).collect();
+        // Each kept pixel's position among the kept ones.
+        let renumbered: Vec<u32> = pixel_kept
+            .iter()
+            .scan(0u32, |kept_before, &kept| {
+                let at = *kept_before;
+                *kept_before += kept as u32;
+                Some(at)
+            })
+            .collect();
+        retain_flagged(&mut self.pixels, &pixel_kept);
+        retain_flagged(&mut self.samples, &pixel_kept);
+        retain_flagged(&mut self.coverage, &pixel_kept);
+        retain_flagged(&mut self.triangle, &sample_kept);
+        retain_flagged(&mut self.direction, &sample_kept);
+        retain_flagged(&mut self.random, &sample_kept);
+        retain_flagged(&mut self.point, &sample_kept);
+        retain_flagged(&mut self.segment, &sample_kept);
+        self.segment.iter_mut().for_each(|s| *s = renumbered[*s as usize]);
+    }
+
     /// Number of hit samples.
     pub fn len(&self) -> usize {
         self.segment.len()
@@ -316,6 +342,14 @@ impl PrimaryHits {
         }
         image
     }
+}
+
+/// Keeps the items of `items` whose flag in `kept` is set (one flag per item).
+fn retain_flagged<T>(items: &mut Vec<T>, kept: &[bool]) {
+    assert_eq!(items.len(), kept.len(), "retain_flagged: one flag per item");
+    // `retain` visits the items once each, in order.
+    let mut flags = kept.iter();
+    items.retain(|_| *flags.next().expect("one flag per item"));
 }
 
 /// The probe on a tape: mesh arrays and material textures.

@@ -811,3 +811,47 @@ fn floor_under_roof_is_lit_as_traced(sampling: &LightSampling) {
         "the floor's light differs from the traced rays by up to {worst}"
     );
 }
+
+#[test]
+fn a_subset_of_pixels_renders_as_they_render_in_the_whole() {
+    let probe = SodaCan::default().build();
+    let camera = can_camera(30.0);
+    let env = studio().downsample(32);
+    let sampler = EnvSampler::new(&env);
+    let settings = RenderSettings { spp: 4, seed: 3 };
+    let checkerboard = |p: u32| (p % camera.width + p / camera.width).is_multiple_of(2);
+    for sampling in [LightSampling::BSDF, LightSampling::mis(&sampler).with_interreflection()] {
+        let (whole, whole_rgb) = render(&probe, &Pose::IDENTITY, &camera, &env, &GgxMetal, settings, &sampling);
+        let tape = Tape::<f64>::new();
+        let vars = ProbeVars::new(&tape, &probe, false);
+        let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(&Pose::IDENTITY), false));
+        let mut half = PrimaryHits::trace(&probe.mesh, &posed.position_values(), &camera, &settings);
+        half.retain_pixels(checkerboard);
+        let expected: Vec<u32> = whole.pixels.iter().copied().filter(|&p| checkerboard(p)).collect();
+        assert!(expected.len() > 100 && expected.len() < whole.pixels.len());
+        assert_eq!(half.pixels, expected, "{sampling:?}: the kept pixels, in order");
+        assert!(
+            half.segment.windows(2).all(|s| s[0] <= s[1]) && half.segment.last() == Some(&(expected.len() as u32 - 1)),
+            "{sampling:?}: samples stay in pixel order and point into the kept pixels"
+        );
+        let rgb = light_samples_with(
+            &tape,
+            &half,
+            &camera,
+            &vars,
+            &posed,
+            &probe.mesh.triangles,
+            &GgxMetal,
+            &sampling,
+        )
+        .radiance(&ImageVars::env(&tape, &env, false))
+        .map(|c| tape.to_vec(c));
+        for (k, p) in half.pixels.iter().enumerate() {
+            let w = whole.pixels.iter().position(|q| q == p).expect("a pixel of the whole");
+            assert_eq!(half.coverage[k], whole.coverage[w]);
+            for c in 0..3 {
+                assert_eq!(rgb[c][k], whole_rgb[c][w], "{sampling:?}: pixel {p} channel {c}");
+            }
+        }
+    }
+}

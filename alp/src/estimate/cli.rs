@@ -53,6 +53,11 @@ pub struct EstimateArgs {
     /// none, at every quality).
     #[arg(long)]
     pub rounds: Option<usize>,
+    /// Search the probe's size in the photo by the lighting's fit (steps of
+    /// half a pixel at the mask's radius): for a mask that may be a pixel
+    /// or two too wide or too narrow. About 2 s more.
+    #[arg(long)]
+    pub size_search: bool,
 }
 
 fn parse_quality(q: &str) -> Result<Quality> {
@@ -90,6 +95,9 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     settings.env_size = parse_size(&args.env_size)?;
     if let Some(rounds) = args.rounds {
         settings.rounds = rounds;
+    }
+    if args.size_search {
+        settings.size_step_px = 0.5;
     }
     if args.threads == Some(0) {
         return Err(RenderError::value("--threads", "needs at least one thread"));

@@ -231,6 +231,17 @@ fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
     Pose::new(rotation, pose.scale, centre - rotation * (pose.scale * 0.5 * (lo + hi)))
 }
 
+/// `pose` with its scale times `factor`, the centre of its bounding box
+/// kept in place: the probe's image grows about that centre by `factor`
+/// (a larger probe further away looks the same, so this is all a mask a
+/// pixel too wide or too narrow gets wrong about the pose).
+pub fn rescaled(pose: &Pose, mesh: &Mesh, factor: f32) -> Pose {
+    let (lo, hi) = mesh.bounds();
+    let centre = pose.transform_point(0.5 * (lo + hi));
+    let scale = pose.scale * factor;
+    Pose::new(pose.rotation, scale, centre - pose.rotation * (scale * 0.5 * (lo + hi)))
+}
+
 /// `pose` turned by `yaw_deg` about the probe's own axis through the centre
 /// of its bounding box (which stays in place).
 pub fn turned(pose: &Pose, mesh: &Mesh, yaw_deg: f32) -> Pose {

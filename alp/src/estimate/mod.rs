@@ -37,7 +37,10 @@
 //! from the search's map, whose small pose errors it would inherit:
 //! started from it, the mirror sphere's error on five scenes was 10.4 deg
 //! against 8.9);
-//! the *lean* line search (`lean_search`: the lean of the axis towards the
+//! on request (`Settings::size_step_px`) the *size* line search (the
+//! probe's size in the photo, which a mask a pixel off gets wrong, scored
+//! as the lean's);
+//! the *lean* line search (`pose_line_search`: the lean of the axis towards the
 //! view ray, which the outline tells least, scored by the weighted error
 //! of the lighting solved at each lean with MIS guided by the pilot map);
 //! then the *final* solve at more samples per pixel, MIS guided by the
@@ -147,7 +150,7 @@ pub struct Settings {
     pub spp_pilot: u32,
     /// The step (degrees) of a line search over the lean of the searched
     /// pose towards the view ray (`init::leaned`, the turn of the axis the
-    /// outline tells least; see `lean_search`): leans of 0 and of a step
+    /// outline tells least; see `pose_line_search`): leans of 0 and of a step
     /// either way, steps doubling while the score rises (up to
     /// `lean_reach_deg`), then the vertex of the parabola through the best
     /// three. Each lean is scored by the data term's weighted error (dB)
@@ -173,11 +176,31 @@ pub struct Settings {
     /// 0.25 px steps) took the twins to 4.47 / 0.91 / 0.59 at nearly twice
     /// the time: not done.
     pub lean_step_deg: f32,
-    /// The score (dB) by which a leaned pose must beat the searched one:
-    /// the leans' samples move with the pose, and a small gain is noise.
-    pub lean_margin_db: f64,
+    /// The score (dB) by which a pose a line search moved to (the size's,
+    /// the lean's) must beat the searched one: the candidates' samples
+    /// move with the pose, and a small gain is noise.
+    pub search_margin_db: f64,
     /// How far (degrees) the lean search may lean the searched pose either way.
     pub lean_reach_deg: f32,
+    /// The step (pixels) of a line search over the probe's size in the
+    /// photo (`init::rescaled`: its outline grown by that many pixels at the
+    /// mask's radius, the centre kept), before the lean's and scored the
+    /// same way, on a checkerboard half of the pixels: a mask a pixel too
+    /// wide or too narrow (a segmentation's usual error) makes the
+    /// outline's pose too large or too small, which turns every normal of
+    /// the probe by the angle a pixel spans at its radius. 0 (every
+    /// quality's default; `alp estimate --size-search` sets 0.5): no search.
+    /// On the suite's 18 Mitsuba twins at default quality with masks grown
+    /// by a pixel (`tools/eval_suite.py --mask-error 1`), 7.11 / 2.00 /
+    /// 1.37 deg mirror / shiny / diffuse without it, 5.92 / 1.62 / 1.03 at
+    /// 0.5 (it shrank 14 of the 18 outlines, by 0.2 to 2 px, and grew 2);
+    /// with the exact masks it kept the outline in 10 of 13 scenes (the
+    /// lying studio can shrank by 2 px: 5.89 -> 7.11 deg in mirror), 4.92
+    /// -> 4.99 deg in mirror on those 13, at about 2 s more a run: off
+    /// unless the mask is known to be rough.
+    pub size_step_px: f32,
+    /// How far (pixels) the size search may grow or shrink the outline.
+    pub size_reach_px: f32,
     /// Samples per pixel (per strategy) of each lean's lighting solve. At
     /// 8 rather than 16 on the suite's 18 Mitsuba twins: 4.85 / 1.17 /
     /// 0.85 deg against 4.68 / 0.99 / 0.65 (both scored by PSNR).
@@ -288,8 +311,10 @@ impl Settings {
             spp_pose,
             spp_pilot,
             lean_step_deg,
-            lean_margin_db: 0.3,
+            search_margin_db: 0.3,
             lean_reach_deg: 2.4,
+            size_step_px: 0.0,
+            size_reach_px: 2.0,
             spp_lean,
             spp_final,
             working_height: None,
@@ -483,9 +508,12 @@ pub struct Report {
     pub starts: Vec<StartReport>,
     /// The index of the start kept (none when the pose was given).
     pub chosen_start: Option<usize>,
+    /// The size line search (none when the pose was given, with no pilot
+    /// map, or with `size_step_px` 0, as at fast quality).
+    pub size: Option<LineSearchReport>,
     /// The lean line search (none when the pose was given, with no pilot
     /// map, or with `lean_step_deg` 0, as at fast quality).
-    pub lean: Option<LeanReport>,
+    pub lean: Option<LineSearchReport>,
     /// Working env map resolution (width, height) and why.
     pub working_resolution: (usize, usize),
     /// The smallest roughness of the probe, which set it.
@@ -504,15 +532,17 @@ pub struct Report {
     pub wall_s: f64,
 }
 
-/// The lean line search's account (see `Settings::lean_step_deg`).
+/// A line search's account over one parameter of the pose (the lean's
+/// in degrees, see `Settings::lean_step_deg`; the size's in pixels, see
+/// `Settings::size_step_px`).
 #[derive(Clone, Debug, Serialize)]
-pub struct LeanReport {
-    /// Every lean tried (degrees towards the view ray) and its score (the
-    /// data term's weighted error, -dB: higher is better; minus infinity,
-    /// written as null, where it could not be scored), in order.
+pub struct LineSearchReport {
+    /// Every value tried and its score (the data term's weighted error,
+    /// -dB: higher is better; minus infinity, written as null, where it
+    /// could not be scored), in order.
     pub tried: Vec<(f32, f64)>,
-    /// The lean kept (0: the searched pose).
-    pub kept_deg: f32,
+    /// The value kept (0: the searched pose).
+    pub kept: f32,
 }
 
 /// The estimate.
@@ -612,6 +642,42 @@ enum LightingPurpose {
     /// at 0.3 times it (and blending the two maps' colours by luminance
     /// stays on that trade: 4.38 / 0.76 / 0.48).
     Output,
+}
+
+/// Which of the probe's pixels a lighting fit reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Pixels {
+    /// Every pixel.
+    All,
+    /// Those whose row and column sum to an even number: half the samples,
+    /// transport and solve of the whole, spread evenly over the probe.
+    Checkerboard,
+}
+
+impl Pixels {
+    /// Whether the fit reads pixel `p` of an image `width` wide.
+    fn keeps(self, p: u32, width: u32) -> bool {
+        match self {
+            Pixels::All => true,
+            Pixels::Checkerboard => (p % width + p / width).is_multiple_of(2),
+        }
+    }
+
+    /// The nearest pixels the fit also reads around pixel `p` of a
+    /// `width x height` image (row-major indices): the 4-neighbours, or
+    /// on a checkerboard the diagonal ones.
+    fn neighbours(self, p: usize, width: usize, height: usize) -> [Option<usize>; 4] {
+        let (x, y) = ((p % width) as isize, (p / width) as isize);
+        let at = |dx: isize, dy: isize| {
+            let (u, v) = (x + dx, y + dy);
+            ((0..width as isize).contains(&u) && (0..height as isize).contains(&v))
+                .then(|| v as usize * width + u as usize)
+        };
+        match self {
+            Pixels::All => [at(-1, 0), at(1, 0), at(0, -1), at(0, 1)],
+            Pixels::Checkerboard => [at(-1, -1), at(1, -1), at(-1, 1), at(1, 1)],
+        }
+    }
 }
 
 /// Per-pixel data term weights for `purpose`, zero outside the mask, on
@@ -772,6 +838,7 @@ fn fit_lighting(
     clipped: &[bool],
     smoothness: Smoothness,
     purpose: LightingPurpose,
+    pixels: Pixels,
     sampling: &LightSampling,
     start: Option<&[f64]>,
     max_iters: usize,
@@ -798,12 +865,13 @@ fn fit_lighting(
         let tape = Tape::<f32>::new();
         let vars = ProbeVars::new(&tape, probe.asset, false);
         let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
-        let hits = PrimaryHits::trace(
+        let mut hits = PrimaryHits::trace(
             &probe.asset.mesh,
             &posed.position_values(),
             &photo.camera,
             &pass_settings,
         );
+        hits.retain_pixels(|p| pixels.keeps(p, photo.camera.width));
         if hits.is_empty() {
             return Err(RenderError::value("pose", "the probe left the camera's view"));
         }
@@ -847,15 +915,7 @@ fn fit_lighting(
     let (target, mut weight) = pixel_targets(photo, &hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
         let shares = LitShares::new(&segment, &direct, &lit, &env_sampled, hits.pixels.len());
-        let edges = albedo_edges(
-            &hits,
-            &row,
-            &segment,
-            &throughput,
-            &direct,
-            &shares.direct,
-            photo.camera.width as usize,
-        );
+        let edges = albedo_edges(&hits, &row, &segment, &throughput, &direct, &shares.direct, pixels);
         weight
             .iter_mut()
             .zip(&edges)
@@ -929,7 +989,7 @@ fn fit_lighting(
 }
 
 /// Pixels on an edge of the probe's reflectance (its albedo or roughness
-/// changes between the pixel and a 4-neighbour: their directional
+/// changes between the pixel and a neighbour the fit reads: their directional
 /// albedos, their `direct` samples' summed throughputs over their `lit`
 /// shares (the probe's shadow taken out), differ by more than
 /// [`EDGE_CONTRAST`]): a pose off by a fraction of a pixel puts the photo's
@@ -947,7 +1007,7 @@ fn albedo_edges(
     throughput: &[[f32; 3]],
     direct: &[bool],
     lit: &[f64],
-    width: usize,
+    pixels: Pixels,
 ) -> Vec<bool> {
     let mut albedo = vec![[0.0f64; 3]; hits.pixels.len()];
     for ((&s, t), d) in segment.iter().zip(throughput).zip(direct) {
@@ -968,17 +1028,14 @@ fn albedo_edges(
         .iter()
         .enumerate()
         .map(|(k, &p)| {
-            let (x, y) = (p as usize % width, p as usize / width);
-            let neighbours = [
-                (x > 0).then(|| p as usize - 1),
-                (x + 1 < width).then(|| p as usize + 1),
-                (y > 0).then(|| p as usize - width),
-                Some(p as usize + width).filter(|&q| q < row.len()),
-            ];
-            neighbours.into_iter().flatten().any(|q| {
-                let r = row[q];
-                r != u32::MAX && contrast(albedo[k], albedo[r as usize]) > EDGE_CONTRAST
-            })
+            pixels
+                .neighbours(p as usize, hits.width, hits.height)
+                .into_iter()
+                .flatten()
+                .any(|q| {
+                    let r = row[q];
+                    r != u32::MAX && contrast(albedo[k], albedo[r as usize]) > EDGE_CONTRAST
+                })
         })
         .collect()
 }
@@ -1489,6 +1546,7 @@ fn search_pose(
             clipped,
             Smoothness::quadratic(1.0),
             LightingPurpose::Search,
+            Pixels::All,
             &LightSampling::BSDF,
             None,
             SOLVE_ITERS,
@@ -1590,6 +1648,7 @@ fn search_pose(
             clipped,
             Smoothness::quadratic(search_smoothness),
             LightingPurpose::Search,
+            Pixels::All,
             &LightSampling::BSDF,
             start,
             SOLVE_ITERS,
@@ -1660,54 +1719,59 @@ fn line_search_max(step: f32, reach: f32, mut score: impl FnMut(f32) -> Result<f
     Ok(tried)
 }
 
-/// The searched `pose` leaned towards the view ray (`init::leaned`: the
-/// turn of the axis the outline tells least) by the line search
-/// [`line_search_max`] of [`Settings::lean_step_deg`], scored by the data
-/// term's weighted error (dB) of the lighting solved at each lean from the
-/// pilot map `pilot` with MIS guided by it ([`Settings::spp_lean`]): the
-/// weighted error, not the PSNR, which a sun's highlight dominates. A
-/// leaned pose is kept only if it beats the searched one by
-/// [`Settings::lean_margin_db`]. Returns the kept pose, its map and the
-/// search's account.
+/// A line search over one parameter of the pose ([`line_search_max`] in
+/// steps of `step`, up to `reach` either way; `candidate(x)` is the pose
+/// at `x`, 0 the searched one), each candidate scored by the data term's
+/// weighted error (dB) of the lighting solved there from the map `start`
+/// with MIS guided by it ([`Settings::spp_lean`], on a checkerboard half
+/// of the pixels): the weighted error, not the PSNR, which a sun's
+/// highlight dominates. A candidate is kept only if it beats the searched
+/// pose by [`Settings::search_margin_db`]. Each candidate scored is a
+/// phase named `phase`. Returns the kept pose, its map and the search's
+/// account.
 #[allow(clippy::too_many_arguments)]
-fn lean_search(
+fn pose_line_search(
     probe: &Probe,
     photo: &Photo,
-    pose: &Pose,
-    pilot: &[f64],
+    start: &[f64],
     work: (usize, usize),
     clipped: &[bool],
     settings: &Settings,
     phases: &mut PhaseLog,
-) -> Result<(Pose, Vec<f64>, LeanReport)> {
-    let sampler = EnvSampler::new(&env_from_texels(pilot, work.0, work.1)?);
+    phase: &str,
+    (step, reach): (f32, f32),
+    pixels: Pixels,
+    candidate: impl Fn(f32) -> Pose,
+) -> Result<(Pose, Vec<f64>, LineSearchReport)> {
+    let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
     let sampling = LightSampling::mis(&sampler).with_interreflection();
     let render = RenderSettings {
         spp: final_spp(settings.spp_lean, photo.mask.count(), sampling.strategies()),
         seed: settings.seed.wrapping_add(79),
     };
-    // The searched pose's map, and the best lean's (not their transports).
+    // The searched pose's map, and the best candidate's (not their transports).
     let mut centre: Option<Vec<f64>> = None;
     let mut best: Option<(f32, Vec<f64>, f64)> = None;
-    let tried = line_search_max(settings.lean_step_deg, settings.lean_reach_deg, |deg| {
+    let tried = line_search_max(step, reach, |x| {
         let t1 = Instant::now();
-        let candidate = init::leaned(pose, &probe.asset.mesh, &photo.camera, deg);
+        let pose = candidate(x);
         let fit = match fit_lighting(
             probe,
             photo,
-            &candidate,
+            &pose,
             work,
             &render,
             clipped,
             Smoothness::quadratic(settings.smoothness),
             LightingPurpose::Output,
+            pixels,
             &sampling,
-            Some(pilot),
+            Some(start),
             LEAN_SOLVE_ITERS,
         ) {
             Ok(fit) => fit,
-            // A lean that takes the probe out of the view is no candidate.
-            Err(_) if deg != 0.0 => return Ok(f64::NEG_INFINITY),
+            // A pose that takes the probe out of the view is no candidate.
+            Err(_) if x != 0.0 => return Ok(f64::NEG_INFINITY),
             Err(e) => return Err(e),
         };
         // No data pixel left (an error of 0): no candidate either.
@@ -1717,23 +1781,23 @@ fn lean_search(
         };
         phases.expect_more(1);
         phases.push(PhaseReport {
-            pose: Some(PoseRecord::from(&candidate)),
-            ..lighting_report("lighting_lean", &fit, t1)
+            pose: Some(PoseRecord::from(&pose)),
+            ..lighting_report(phase, &fit, t1)
         });
         if centre.is_none() {
             centre = Some(fit.env.clone());
         }
         if best.as_ref().is_none_or(|b| score > b.2) {
-            best = Some((deg, fit.env, score));
+            best = Some((x, fit.env, score));
         }
         Ok(score)
     })?;
-    let (deg, map, score) = best.expect("the line search scores the searched pose");
-    let (kept_deg, kept, map) = match score > tried[0].1 + settings.lean_margin_db {
-        true => (deg, init::leaned(pose, &probe.asset.mesh, &photo.camera, deg), map),
-        false => (0.0, *pose, centre.expect("the searched pose is scored first")),
+    let (x, map, score) = best.expect("the line search scores the searched pose");
+    let (kept, map) = match score > tried[0].1 + settings.search_margin_db {
+        true => (x, map),
+        false => (0.0, centre.expect("the searched pose is scored first")),
     };
-    Ok((kept, map, LeanReport { tried, kept_deg }))
+    Ok((candidate(kept), map, LineSearchReport { tried, kept }))
 }
 
 /// The phases done so far, each announced as it ends with the count done
@@ -1814,8 +1878,8 @@ pub fn estimate_with_progress(
     // pilot map solved from BRDF samples guides the env-map samples (MIS;
     // see Settings::spp_pilot) of the lean search's solves and starts them;
     // the kept lean's map guides and starts the final solve.
-    let (pose, pilot, lean) = match settings.spp_pilot {
-        0 => (pose, None, None),
+    let (pose, pilot, size, lean) = match settings.spp_pilot {
+        0 => (pose, None, None, None),
         spp => {
             let t1 = Instant::now();
             let pilot_settings = RenderSettings {
@@ -1831,21 +1895,53 @@ pub fn estimate_with_progress(
                 &clipped,
                 Smoothness::quadratic(settings.smoothness),
                 LightingPurpose::Output,
+                Pixels::All,
                 &LightSampling::BSDF.with_interreflection(),
                 None,
                 SOLVE_ITERS,
             )?;
             phases.push(lighting_report("lighting_pilot", &fit, t1));
-            // The pilot's transport goes before the leans' are built.
-            let map = fit.into_map();
-            match settings.known_pose.is_none() && settings.lean_step_deg > 0.0 {
-                true => {
-                    let (pose, map, lean) =
-                        lean_search(&probe, photo, &pose, &map, work, &clipped, settings, &mut phases)?;
-                    (pose, Some(map), Some(lean))
-                }
-                false => (pose, Some(map), None),
-            }
+            // The pilot's transport goes before the searches' are built.
+            let (mut pose, mut map) = (pose, fit.into_map());
+            let searched = settings.known_pose.is_none();
+            let mut search =
+                |phase: &str, (step, reach): (f32, f32), pixels: Pixels, candidate: &dyn Fn(&Pose, f32) -> Pose| {
+                    if !searched || step <= 0.0 {
+                        return Ok(None);
+                    }
+                    let from = pose;
+                    let (kept, kept_map, report) = pose_line_search(
+                        &probe,
+                        photo,
+                        &map,
+                        work,
+                        &clipped,
+                        settings,
+                        &mut phases,
+                        phase,
+                        (step, reach),
+                        pixels,
+                        |x| candidate(&from, x),
+                    )?;
+                    (pose, map) = (kept, kept_map);
+                    Ok::<_, RenderError>(Some(report))
+                };
+            // The size first: a mask a pixel too wide or too narrow grows or
+            // shrinks the outline's pose, and the probe's every normal with it.
+            let radius_px = (photo.mask.count() as f32 / std::f32::consts::PI).sqrt();
+            let size = search(
+                "lighting_size",
+                (settings.size_step_px, settings.size_reach_px),
+                Pixels::Checkerboard,
+                &|pose, px| init::rescaled(pose, &probe.asset.mesh, 1.0 + px / radius_px),
+            )?;
+            let lean = search(
+                "lighting_lean",
+                (settings.lean_step_deg, settings.lean_reach_deg),
+                Pixels::All,
+                &|pose, deg| init::leaned(pose, &probe.asset.mesh, &photo.camera, deg),
+            )?;
+            (pose, Some(map), size, lean)
         }
     };
     let t2 = Instant::now();
@@ -1872,6 +1968,7 @@ pub fn estimate_with_progress(
         &clipped,
         settings.final_smoothness,
         LightingPurpose::Output,
+        Pixels::All,
         &sampling,
         pilot.as_deref(),
         SOLVE_ITERS,
@@ -1888,6 +1985,7 @@ pub fn estimate_with_progress(
         axes,
         starts,
         chosen_start: chosen,
+        size,
         lean,
         working_resolution: work,
         min_roughness,
@@ -1909,6 +2007,29 @@ pub fn estimate_with_progress(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fit_on_part_of_the_pixels_compares_each_with_its_nearest_kept_neighbours() {
+        let (width, height) = (5usize, 4usize);
+        for pixels in [Pixels::All, Pixels::Checkerboard] {
+            let kept = |p: usize| pixels.keeps(p as u32, width as u32);
+            let count = (0..width * height).filter(|&p| kept(p)).count();
+            assert_eq!(count, if pixels == Pixels::All { 20 } else { 10 }, "{pixels:?}");
+            for p in (0..width * height).filter(|&p| kept(p)) {
+                let (x, y) = ((p % width) as i64, (p / width) as i64);
+                let found: Vec<usize> = pixels.neighbours(p, width, height).into_iter().flatten().collect();
+                // Every kept pixel in the image at the nearest distance, and nothing else.
+                let nearest = |q: usize| {
+                    let (u, v) = ((q % width) as i64, (q / width) as i64);
+                    (u - x).pow(2) + (v - y).pow(2) == if pixels == Pixels::All { 1 } else { 2 }
+                };
+                let expected: Vec<usize> = (0..width * height).filter(|&q| kept(q) && nearest(q)).collect();
+                let mut sorted = found.clone();
+                sorted.sort();
+                assert_eq!(sorted, expected, "{pixels:?}: pixel {p}");
+            }
+        }
+    }
 
     /// A start's account with the ranking errors `rgb_angle_deg` and `relative_error`.
     fn start(rgb_angle_deg: f64, relative_error: f64) -> StartReport {
