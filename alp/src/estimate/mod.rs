@@ -508,8 +508,9 @@ pub struct Report {
     pub starts: Vec<StartReport>,
     /// The index of the start kept (none when the pose was given).
     pub chosen_start: Option<usize>,
-    /// The size line search (none when the pose was given, with no pilot
-    /// map, or with `size_step_px` 0, as at fast quality).
+    /// The size line search (none unless asked for: `size_step_px` above
+    /// 0, `alp estimate --size-search`; nor when the pose was given or
+    /// there is no pilot map).
     pub size: Option<LineSearchReport>,
     /// The lean line search (none when the pose was given, with no pilot
     /// map, or with `lean_step_deg` 0, as at fast quality).
@@ -1723,9 +1724,9 @@ fn line_search_max(step: f32, reach: f32, mut score: impl FnMut(f32) -> Result<f
 /// steps of `step`, up to `reach` either way; `candidate(x)` is the pose
 /// at `x`, 0 the searched one), each candidate scored by the data term's
 /// weighted error (dB) of the lighting solved there from the map `start`
-/// with MIS guided by it ([`Settings::spp_lean`], on a checkerboard half
-/// of the pixels): the weighted error, not the PSNR, which a sun's
-/// highlight dominates. A candidate is kept only if it beats the searched
+/// with MIS guided by it ([`Settings::spp_lean`], on the pixels `pixels`
+/// keeps): the weighted error, not the PSNR, which a sun's highlight
+/// dominates. A candidate is kept only if it beats the searched
 /// pose by [`Settings::search_margin_db`]. Each candidate scored is a
 /// phase named `phase`. Returns the kept pose, its map and the search's
 /// account.
@@ -1876,8 +1877,9 @@ pub fn estimate_with_progress(
     // / 0.93 -> 5.15 / 1.04 / 0.90 deg mirror / shiny / diffuse (the
     // upright courtyard can 6.19 / 1.39 / 0.46 -> 5.36 / 1.05 / 0.48). A
     // pilot map solved from BRDF samples guides the env-map samples (MIS;
-    // see Settings::spp_pilot) of the lean search's solves and starts them;
-    // the kept lean's map guides and starts the final solve.
+    // see Settings::spp_pilot) of the size and lean searches' solves and
+    // starts them; the map of the pose they keep guides and starts the
+    // final solve.
     let (pose, pilot, size, lean) = match settings.spp_pilot {
         0 => (pose, None, None, None),
         spp => {
