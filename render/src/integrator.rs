@@ -303,6 +303,10 @@ impl PrimaryHits {
     /// costs in proportion to it). `rays` still counts every ray traced.
     pub fn retain_pixels(&mut self, keep: impl Fn(u32) -> bool) {
         let pixel_kept: Vec<bool> = self.pixels.iter().map(|&p| keep(p)).collect();
+        // Keeping all (a fit on every pixel) moves nothing.
+        if pixel_kept.iter().all(|&kept| kept) {
+            return;
+        }
         let sample_kept: Vec<bool> = self.segment.iter().map(|&s| pixel_kept[s as usize]).collect();
         // Each kept pixel's position among the kept ones.
         let renumbered: Vec<u32> = pixel_kept
