@@ -225,10 +225,7 @@ pub fn leaned(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
 /// `pose` with the orientation `rotation`, the centre of the probe's
 /// bounding box kept in place.
 fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
-    let (lo, hi) = mesh.bounds();
-    let centre = pose.transform_point(0.5 * (lo + hi));
-    let rotation = rotation.normalize();
-    Pose::new(rotation, pose.scale, centre - rotation * (pose.scale * 0.5 * (lo + hi)))
+    centred(pose, mesh, rotation.normalize(), pose.scale)
 }
 
 /// `pose` with its scale times `factor`, the centre of its bounding box
@@ -236,10 +233,15 @@ fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
 /// (a larger probe further away looks the same, so this is all a mask a
 /// pixel too wide or too narrow gets wrong about the pose).
 pub fn rescaled(pose: &Pose, mesh: &Mesh, factor: f32) -> Pose {
+    centred(pose, mesh, pose.rotation, pose.scale * factor)
+}
+
+/// The pose of `rotation` and `scale` that keeps the centre of the
+/// probe's bounding box where `pose` has it.
+fn centred(pose: &Pose, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
     let (lo, hi) = mesh.bounds();
     let centre = pose.transform_point(0.5 * (lo + hi));
-    let scale = pose.scale * factor;
-    Pose::new(pose.rotation, scale, centre - pose.rotation * (scale * 0.5 * (lo + hi)))
+    Pose::new(rotation, scale, centre - rotation * (scale * 0.5 * (lo + hi)))
 }
 
 /// `pose` turned by `yaw_deg` about the probe's own axis through the centre

@@ -509,8 +509,9 @@ struct Pair {
 struct Prior {
     pairs: Vec<Pair>,
     lambda: f64,
-    /// The squared difference (relative, in units of the mean level) past
-    /// which the penalty turns linear; 0: quadratic.
+    /// The squared difference (of a pair's relative difference `q |d|^2`)
+    /// past which the penalty turns linear: the smoothness's edge times the
+    /// start's mean level (plus its dark floor), squared; 0: quadratic.
     edge_sq: f64,
 }
 
