@@ -2,7 +2,9 @@
 //! to the pose, f32, on 1 and 2 threads.
 //!
 //! A 640x480 camera sees the procedural soda can about 200 px tall; the reference is the can's
-//! hard mask at a pose a few pixels away. One JSON line per case on stdout. Run with
+//! hard mask at a pose a few pixels away. Two meshes of the can (`probe`): the default one (6k
+//! triangles) and a dense one (`dense_can`, 127k: what a scanned probe brings, whose triangles
+//! are a pixel or less). One JSON line per case on stdout. Run with
 //! `cargo bench --bench render_silhouette`.
 
 use std::hint::black_box;
@@ -33,7 +35,17 @@ fn time(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
 }
 
 fn main() {
-    let mesh = SodaCan::default().build().mesh;
+    let dense = SodaCan {
+        segments: 256,
+        profile_step: 0.001,
+        ..SodaCan::default()
+    };
+    for (probe, can) in [("can", SodaCan::default()), ("dense_can", dense)] {
+        bench_probe(probe, &can.build().mesh);
+    }
+}
+
+fn bench_probe(probe: &str, mesh: &render::mesh::Mesh) {
     // f = 240 / tan(15 deg) = 896 px: the 0.122 m can is 200 px tall at 0.546 m.
     let camera = Camera::new(
         640,
@@ -51,8 +63,8 @@ fn main() {
     );
     let truth = Pose::new(pose.rotation, 1.02, Vec3::new(0.004, -0.002, 0.0));
     let settings = SilhouetteSettings::default();
-    let edges = EdgeAdjacency::new(&mesh);
-    let reference_mask = SilhouettePlan::with_edges(&mesh, &edges, &mesh.posed(&truth).positions, &camera, settings)
+    let edges = EdgeAdjacency::new(mesh);
+    let reference_mask = SilhouettePlan::with_edges(mesh, &edges, &mesh.posed(&truth).positions, &camera, settings)
         .expect("reference plan")
         .hard_mask();
     let reference = ReferenceMask::new(&reference_mask).expect("reference is not empty");
@@ -66,22 +78,22 @@ fn main() {
             .build()
             .expect("thread pool");
         pool.install(|| {
-            let plan = SilhouettePlan::with_edges(&mesh, &edges, &posed, &camera, settings).expect("plan");
+            let plan = SilhouettePlan::with_edges(mesh, &edges, &posed, &camera, settings).expect("plan");
             let check_plan = json!({"band_pixels": plan.band_pixels().len(), "pairs": plan.pair_count(),
                                     "contour_edges": plan.contour_edge_count(), "triangles": mesh.triangles.len()});
             let (median, min) = time(runs, || {
-                black_box(SilhouettePlan::with_edges(&mesh, &edges, &posed, &camera, settings).expect("plan"));
+                black_box(SilhouettePlan::with_edges(mesh, &edges, &posed, &camera, settings).expect("plan"));
             });
             println!(
                 "{}",
-                json!({"bench": "silhouette", "impl": "tape", "mode": "plan", "threads": threads,
+                json!({"bench": "silhouette", "impl": "tape", "probe": probe, "mode": "plan", "threads": threads,
                        "median_s": median, "min_s": min, "runs": runs, "check": check_plan})
             );
 
             let tape = Tape::<f32>::new();
             let params: Vec<f32> = packed.iter().map(|&v| v as f32).collect();
             let leaf = tape.leaf(&params).id();
-            let mesh_vars = MeshVars::new(&tape, &mesh);
+            let mesh_vars = MeshVars::new(&tape, mesh);
             let mark = tape.mark();
             for mode in ["fwd", "fwd_bwd"] {
                 let mut check = json!({});
@@ -104,7 +116,7 @@ fn main() {
                 });
                 println!(
                     "{}",
-                    json!({"bench": "silhouette", "impl": "tape", "mode": mode, "threads": threads,
+                    json!({"bench": "silhouette", "impl": "tape", "probe": probe, "mode": mode, "threads": threads,
                            "median_s": median, "min_s": min, "runs": runs, "check": check})
                 );
             }

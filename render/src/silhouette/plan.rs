@@ -12,9 +12,15 @@ use crate::mesh::{EdgeAdjacency, Mesh};
 /// Projected triangles with less area than this (pixels^2, either orientation) are edge-on or
 /// degenerate: neither front nor back.
 const MIN_PROJECTED_AREA: f32 = 1e-6;
-/// Cell size of the triangle grid, pixels.
+/// Cells of the front-triangle grid are this many triangles across (they tile the silhouette);
+/// the suite's procedural probes (4-6k triangles) get the largest cells (sizes below).
+const TRIANGLES_ACROSS_CELL: f32 = 2.0;
+/// Cells of the rim's and the contour edges' grids are this many items across (they line the
+/// silhouette's edge).
+const RIM_ACROSS_CELL: f32 = 4.0;
+/// Largest cell of the triangle grids, pixels.
 const TRIANGLE_CELL_PX: f32 = 8.0;
-/// Cell size of the contour-edge grid, pixels.
+/// Largest cell of the contour-edge grid, pixels.
 const CONTOUR_CELL_PX: f32 = 16.0;
 /// How far to either side of a contour edge's midpoint (pixels) the plan looks for the probe: an
 /// edge of the outline has it on one side only.
@@ -128,17 +134,32 @@ impl SilhouettePlan {
             ));
         }
 
-        // Candidate triangles of a band pixel: those whose box, grown by the band, holds its centre.
-        let reach = Vec2::splat(settings.band_px);
         let boxes: Vec<(u32, Vec2, Vec2)> = front
             .iter()
             .enumerate()
             .map(|(k, (_, tri))| {
                 let [a, b, c] = corners(tri);
-                (k as u32, a.min(b).min(c) - reach, a.max(b).max(c) + reach)
+                (k as u32, a.min(b).min(c), a.max(b).max(c))
             })
             .collect();
-        let triangle_grid = BoxGrid::new(width, height, TRIANGLE_CELL_PX, &boxes);
+        let triangle_grid = BoxGrid::new(width, height, &boxes, TRIANGLES_ACROSS_CELL, TRIANGLE_CELL_PX);
+        // The rim: front triangles with an edge that no other front triangle shares. Two front
+        // triangles sharing an edge lie on either side of it in the image, so the silhouette's
+        // edge runs along the rim's edges only, and the rim holds the front triangle nearest to
+        // any uncovered pixel centre: on a dense mesh, a few of the thousands near the limb.
+        let mut rim = vec![false; mesh.triangles.len()];
+        for edge in &edges.edges {
+            let fronts = || edge.triangles.iter().filter(|&&t| facing[t as usize] > 0);
+            if fronts().count() != 2 {
+                fronts().for_each(|&t| rim[t as usize] = true);
+            }
+        }
+        let rim_boxes: Vec<(u32, Vec2, Vec2)> = boxes
+            .iter()
+            .copied()
+            .filter(|&(k, _, _)| rim[front[k as usize].0 as usize])
+            .collect();
+        let rim_grid = BoxGrid::new(width, height, &rim_boxes, RIM_ACROSS_CELL, TRIANGLE_CELL_PX);
         let covers = |q: Vec2| {
             triangle_grid
                 .items_at(q)
@@ -168,26 +189,27 @@ impl SilhouettePlan {
                 (k as u32, a.min(b), a.max(b))
             })
             .collect();
-        let contour_grid = BoxGrid::new(width, height, CONTOUR_CELL_PX, &contour_boxes);
+        let contour_grid = BoxGrid::new(width, height, &contour_boxes, RIM_ACROSS_CELL, CONTOUR_CELL_PX);
         // The nearest point of the outline itself: an edge partly hidden behind the probe is
         // outline only where the probe lies on one side of it.
         let nearest_outline = |p: Vec2| {
             let on_outline = |k: u32| {
-                let ([a, b], d2) = outline_feature(&contour, &projected, k, p);
+                let ([a, b], _) = outline_feature(&contour, &projected, k, p);
                 let (a, b) = (projected[a as usize], projected[b as usize]);
                 let [ea, eb] = contour[k as usize].map(|i| projected[i as usize]);
                 let foot = match a == b {
                     true => a,
                     false => a + (p - a).dot(b - a) / (b - a).length_squared().max(MIN_SEGMENT_LENGTH2) * (b - a),
                 };
-                match one_sided(foot, ea, eb) {
-                    true => d2,
-                    false => f32::INFINITY,
-                }
+                one_sided(foot, ea, eb)
             };
             contour_grid
-                .nearest(p, on_outline)
-                .filter(|&(_, d2)| d2.is_finite())
+                .nearest(
+                    p,
+                    f32::INFINITY,
+                    |k| outline_feature(&contour, &projected, k, p).1,
+                    on_outline,
+                )
                 .map(|(k, _)| outline_feature(&contour, &projected, k, p))
         };
 
@@ -205,16 +227,10 @@ impl SilhouettePlan {
             let nearest = if covered[pixel as usize] {
                 nearest_outline(p).map(|(feature, _)| (feature, inv_sigma))
             } else {
-                triangle_grid
-                    .items_at(p)
-                    .iter()
-                    .filter(|&&k| {
-                        let (_, lo, hi) = boxes[k as usize];
-                        !(p.cmplt(lo).any() || p.cmpgt(hi).any())
-                    })
-                    .map(|&k| nearest_triangle_feature(p, &front[k as usize].1, corners(&front[k as usize].1)))
-                    .filter(|&(_, d2)| d2 <= cutoff2)
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                let feature = |k: u32| nearest_triangle_feature(p, &front[k as usize].1, corners(&front[k as usize].1));
+                rim_grid
+                    .nearest(p, cutoff2, |k| feature(k).1, |_| true)
+                    .map(|(k, _)| feature(k))
                     .map(|(feature, _)| (feature, -inv_sigma))
             };
             if let Some((feature, signed_inv_sigma)) = nearest {
@@ -303,7 +319,12 @@ impl SilhouettePlan {
     /// `p` at the plan's pose, and its squared distance (pixels^2); `None` without a contour.
     pub(crate) fn nearest_contour(&self, p: Vec2) -> Option<([u32; 2], f32)> {
         self.contour_grid
-            .nearest(p, |k| outline_feature(&self.contour, &self.projected, k, p).1)
+            .nearest(
+                p,
+                f32::INFINITY,
+                |k| outline_feature(&self.contour, &self.projected, k, p).1,
+                |_| true,
+            )
             .map(|(k, _)| outline_feature(&self.contour, &self.projected, k, p))
     }
 }
