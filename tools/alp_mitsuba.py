@@ -284,9 +284,11 @@ def bsdf_dict(mi, probe, fold_visibility, white=False):
             "alpha": _texture(mi, alpha, 1), "specular_reflectance": refl}
 
 
-def sensor_dict(mi, cam, spp, crop=None, seed=0, sampler="independent"):
+def sensor_dict(mi, cam, spp, crop=None, seed=0, sampler="independent", rfilter="box"):
+    """Mitsuba's perspective sensor for our camera; `rfilter` is the film's reconstruction filter
+    (ours is a box: a pixel is the mean over its square; Mitsuba's default is "gaussian")."""
     film = {"type": "hdrfilm", "width": int(cam["width"]), "height": int(cam["height"]),
-            "rfilter": {"type": "box"}, "pixel_format": "rgba",
+            "rfilter": {"type": rfilter}, "pixel_format": "rgba",
             "component_format": "float32"}
     if crop is not None:
         x0, y0, x1, y1 = crop
@@ -301,12 +303,12 @@ def sensor_dict(mi, cam, spp, crop=None, seed=0, sampler="independent"):
 
 
 def scene_dict(mi, probe, pose, cam, env, spp, integrator, crop=None, seed=0, fold_visibility=True,
-               white=False):
+               white=False, rfilter="box"):
     """The whole scene. `env` is OUR map (H x W x 3); it is resampled to Mitsuba's rows."""
     return {
         "type": "scene",
         "integrator": integrator,
-        "sensor": sensor_dict(mi, cam, spp, crop, seed),
+        "sensor": sensor_dict(mi, cam, spp, crop, seed, rfilter=rfilter),
         "probe": {"type": "obj", "filename": probe["mesh"], "face_normals": False,
                   "to_world": mi.ScalarTransform4f(pose.tolist()),
                   "bsdf": bsdf_dict(mi, probe, fold_visibility, white)},

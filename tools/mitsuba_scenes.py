@@ -41,14 +41,15 @@ def principled_dict(mi, probe):
             "roughness": am._texture(mi, rough, 1)}
 
 
-def render(mi, probe, pose, cam, env, spp, max_depth, seed, pass_samples=1 << 22):
+def render(mi, probe, pose, cam, env, spp, max_depth, seed, pass_samples=1 << 22, rfilter="box"):
     """The photo (H x W x 3, black background) by Mitsuba's path tracer, averaged over passes of
     bounded memory."""
     crop = am.probe_bbox(cam, probe, pose)
     x0, y0, x1, y1 = crop
     per_pass = max(1, min(spp, pass_samples // max((x1 - x0) * (y1 - y0), 1)))
     scene = am.scene_dict(mi, probe, pose, cam, env, per_pass,
-                          {"type": "path", "max_depth": max_depth, "hide_emitters": True}, crop)
+                          {"type": "path", "max_depth": max_depth, "hide_emitters": True}, crop,
+                          rfilter=rfilter)
     scene["probe"]["bsdf"] = principled_dict(mi, probe)
     scene = mi.load_dict(scene)
     total, done, k = 0.0, 0, 0
@@ -84,6 +85,9 @@ def main():
                     help="Mitsuba path length: 2 = direct light with shadow rays, 4 = up to three bounces")
     ap.add_argument("--variant", default="llvm_ad_rgb", choices=["scalar_rgb", "llvm_ad_rgb"])
     ap.add_argument("--only", default="", help="comma-separated substrings of scene names")
+    ap.add_argument("--rfilter", default="box", choices=["box", "gaussian"],
+                    help="the film's reconstruction filter: ours is a box (the pixel's mean); Mitsuba's "
+                         "default, a Gaussian (stddev 0.5 px), blurs the photo past the pixel")
     args = ap.parse_args()
     mi = am.setup_variant(args.variant)
     os.makedirs(args.out, exist_ok=True)
@@ -106,7 +110,8 @@ def main():
         cam = am.load_camera(os.path.join(src, "camera.json"))
         pose = am.load_pose(os.path.join(src, "pose.json"))
         env = am.read_exr(os.path.join(src, "gt_env.exr"))
-        image = render(mi, probes[kind], pose, cam, env, args.spp, args.max_depth, meta["seed"])
+        image = render(mi, probes[kind], pose, cam, env, args.spp, args.max_depth, meta["seed"],
+                       rfilter=args.rfilter)
         image = sensor(image, meta.get("noise") or 0.0, meta.get("exposure_clip"), meta["seed"])
         tmp = dst + ".tmp"
         shutil.rmtree(tmp, ignore_errors=True)
@@ -114,7 +119,8 @@ def main():
         for f in FILES_KEPT:
             shutil.copy(os.path.join(src, f), tmp)
         am.write_exr(os.path.join(tmp, "image.exr"), image)
-        meta.update({"renderer": "mitsuba path, max_depth %d" % args.max_depth, "mitsuba_spp": args.spp,
+        meta.update({"renderer": "mitsuba path, max_depth %d, %s filter" % (args.max_depth, args.rfilter),
+                     "mitsuba_spp": args.spp,
                      "mitsuba_s": round(time.time() - t0, 2)})
         with open(os.path.join(tmp, "scene.json"), "w") as f:
             json.dump(meta, f, indent=1)
