@@ -217,3 +217,31 @@ fn a_photo_whose_mask_outgrows_the_budget_is_worked_on_box_filtered_and_re_rende
     // Measured 29.3 dB (the probe's centre 1.8 mm off, its axis 0.6 deg).
     assert!(psnr > 25.0, "full-size re-render PSNR {psnr} dB");
 }
+
+#[test]
+fn a_probe_built_along_another_axis_is_found_as_one_built_along_y() {
+    // The test scene's photo, of the can whose mesh lies along -X: the same
+    // object, posed so as to make the same photo.
+    let (probe, truth, photo, settings) = scene();
+    let built = Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
+    let along_x = render::probe::ProbeAsset {
+        mesh: probe.mesh.posed(&Pose::new(built, 1.0, Vec3::ZERO)),
+        ..probe.clone()
+    };
+    let truth = Pose::new(truth.rotation * built.inverse(), truth.scale, truth.translation);
+    let result = estimate(&photo, &along_x, &settings).expect("an estimate");
+    let axis = Vec3::from_array(result.report.probe_axis);
+    assert!(axis.x.abs() > 0.999, "the probe's axis found along {axis}");
+    let centre = built * Vec3::new(0.0, 0.061, 0.0);
+    let err = (result.pose.transform_point(centre) - truth.transform_point(centre)).length();
+    assert!(err < 0.012, "probe centre off by {err} m");
+    let lid = built * Vec3::Y;
+    let tilt = (result.pose.rotation * lid).dot(truth.rotation * lid);
+    assert!(tilt > 0.99, "probe axis off by {} degrees", tilt.acos().to_degrees());
+    // The lighting alone at the true pose, given in the mesh's own frame.
+    let mut known = settings.clone();
+    known.known_pose = Some(truth);
+    let result = estimate(&photo, &along_x, &known).expect("an estimate");
+    assert_eq!(result.pose, truth, "a known pose is kept");
+    assert!(result.report.psnr_db > 20.0, "PSNR {} dB", result.report.psnr_db);
+}

@@ -11,6 +11,107 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 use render::{RenderError, Result};
 
+/// Eigenvalues of the surface's spread closer than this factor are equal:
+/// no axis stands out (a sphere), or not that one.
+const DISTINCT_SPREAD: f64 = 1.05;
+
+/// An axis found within this angle (degrees) of the mesh's +Y is +Y: the
+/// mesh was built along it (faceting tilts the found axis a little).
+const AXIS_IS_Y_DEG: f64 = 1.0;
+
+/// The rotation that turns the probe's axis to mesh +Y: the estimate turns
+/// the probe about +Y (its yaw starts) and reads its length along it. The
+/// axis is the principal direction of the surface's spread (area-weighted
+/// second moments) whose spread stands out from the other two: the
+/// longest for a probe longer than wide (a can), the shortest for one wider
+/// than long (a ring, a squat cap); an axis of revolution is such a
+/// direction. Identity when the axis is already +Y (to [`AXIS_IS_Y_DEG`])
+/// or none stands out (a sphere). Of the axis's two directions, the one
+/// nearer +Y, or with its largest component positive, goes to +Y.
+pub fn axis_to_y(mesh: &Mesh) -> Quat {
+    let (mut area, mut first, mut second) = (0.0f64, [0.0f64; 3], [[0.0f64; 3]; 3]);
+    for tri in &mesh.triangles {
+        let [a, b, c] = tri.map(|i| mesh.positions[i as usize].as_dvec3());
+        let da = 0.5 * (b - a).cross(c - a).length();
+        let sum = a + b + c;
+        area += da;
+        for i in 0..3 {
+            first[i] += da * sum[i] / 3.0;
+            for j in 0..3 {
+                // The exact second moment of a triangle about the origin.
+                second[i][j] += da / 12.0 * (a[i] * a[j] + b[i] * b[j] + c[i] * c[j] + sum[i] * sum[j]);
+            }
+        }
+    }
+    if area <= 0.0 {
+        return Quat::IDENTITY;
+    }
+    let mean = first.map(|m| m / area);
+    let spread: [[f64; 3]; 3] =
+        std::array::from_fn(|i| std::array::from_fn(|j| second[i][j] / area - mean[i] * mean[j]));
+    let (values, vectors) = symmetric_eigen(spread);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| values[i].total_cmp(&values[j]));
+    let [low, mid, high] = order.map(|k| values[k].max(1e-30));
+    let (stands_out, axis) = match high / mid > mid / low {
+        true => (high / mid, vectors[order[2]]),
+        false => (mid / low, vectors[order[0]]),
+    };
+    let axis = glam::DVec3::from_array(axis);
+    if stands_out < DISTINCT_SPREAD || axis.y.abs() >= AXIS_IS_Y_DEG.to_radians().cos() {
+        return Quat::IDENTITY;
+    }
+    let largest = axis.abs().max_element();
+    let positive = match axis.y.abs() > 1e-3 {
+        true => axis.y > 0.0,
+        false => axis
+            .to_array()
+            .iter()
+            .find(|v| v.abs() == largest)
+            .is_some_and(|v| *v > 0.0),
+    };
+    let axis = if positive { axis } else { -axis };
+    Quat::from_rotation_arc(axis.as_vec3().normalize(), Vec3::Y)
+}
+
+/// Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix, by cyclic
+/// Jacobi rotations.
+fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _ in 0..50 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off <= 1e-15 * scale {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = 0.5 * (a[q][q] - a[p][p]) / a[p][q];
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
+            // A <- J^T A J and V <- V J, J the rotation in the (p, q) plane.
+            let rotate_columns = |m: &mut [[f64; 3]; 3]| {
+                for row in m.iter_mut() {
+                    let (mp, mq) = (row[p], row[q]);
+                    row[p] = c * mp - s * mq;
+                    row[q] = s * mp + c * mq;
+                }
+            };
+            rotate_columns(&mut a);
+            rotate_columns(&mut v);
+            let (ap, aq) = (a[p], a[q]);
+            a[p] = std::array::from_fn(|k| c * ap[k] - s * aq[k]);
+            a[q] = std::array::from_fn(|k| s * ap[k] + c * aq[k]);
+        }
+    }
+    // Eigenvector k is column k of v.
+    let vectors = std::array::from_fn(|k| [v[0][k], v[1][k], v[2][k]]);
+    ([a[0][0], a[1][1], a[2][2]], vectors)
+}
+
 /// The canonical front-facing orientation for `camera`: the probe standing
 /// upright in the world (mesh +Y along the camera's `up`, which FORMATS.md
 /// gives in world coordinates) and turned to face the camera.
@@ -99,12 +200,18 @@ const ROUND_MASK: f32 = 1.15;
 /// direction across it for one wider than long, both when neither), both
 /// ways, either in the image plane or lying on a horizontal surface (the
 /// same image direction, horizontal in the world); for a round mask, along
-/// the view ray both ways (a probe seen end-on). Hypotheses within
-/// `SAME_AXIS_DEG` (15) degrees of an earlier one are left out.
-pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh) -> Vec<Vec3> {
+/// the view ray both ways (a probe seen end-on). Upright is both ways too
+/// unless `top_known` (mesh +Y is the probe's top, as a probe standing on
+/// its -Y end is built; not so for one whose axis [`axis_to_y`] turned to
+/// +Y, whose ends are anyone's guess). Hypotheses within `SAME_AXIS_DEG`
+/// (15) degrees of an earlier one are left out.
+pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_known: bool) -> Vec<Vec3> {
     let up = camera.up.normalize();
     let ray = camera.direction_through(shape.barycenter);
-    let mut candidates = vec![up];
+    let mut candidates = match top_known {
+        true => vec![up],
+        false => vec![up, -up],
+    };
     if shape.elongation > ROUND_MASK {
         let (lo, hi) = mesh.bounds();
         let (length, width) = (hi.y - lo.y, (hi.x - lo.x).max(hi.z - lo.z));
@@ -259,6 +366,55 @@ mod tests {
     use render::integrator::{RenderSettings, render_image};
     use render::procedural::SodaCan;
 
+    #[test]
+    fn the_eigen_decomposition_rebuilds_its_matrix() {
+        let a = [[2.0, -0.7, 0.3], [-0.7, 1.1, 0.05], [0.3, 0.05, 0.4]];
+        let (values, vectors) = symmetric_eigen(a);
+        for i in 0..3 {
+            for j in 0..3 {
+                let rebuilt: f64 = (0..3).map(|k| values[k] * vectors[k][i] * vectors[k][j]).sum();
+                assert!(
+                    (rebuilt - a[i][j]).abs() < 1e-12,
+                    "({i}, {j}): {rebuilt} against {}",
+                    a[i][j]
+                );
+                let dot: f64 = (0..3).map(|k| vectors[i][k] * vectors[j][k]).sum();
+                assert!((dot - (i == j) as u8 as f64).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_probe_s_axis_goes_to_y_whichever_way_its_mesh_was_built() {
+        let can = SodaCan::default().build().mesh;
+        let cap = render::procedural::ThermosCap::default().build().mesh;
+        // A disc-like probe (wider than long, like a ring): a flattened
+        // sphere (its normals, which the axis does not read, left as they were).
+        let sphere = render::procedural::UvSphere::default().build().mesh;
+        let disc = Mesh {
+            positions: sphere
+                .positions
+                .iter()
+                .map(|p| Vec3::new(p.x, 0.3 * p.y, p.z))
+                .collect(),
+            ..sphere.clone()
+        };
+        // Built along +Y: left as it is (the suite's outputs stay as they were).
+        for mesh in [&can, &cap, &disc] {
+            assert_eq!(axis_to_y(mesh), Quat::IDENTITY);
+        }
+        // A sphere has no axis.
+        assert_eq!(axis_to_y(&sphere), Quat::IDENTITY);
+        // Built along another axis (and off the origin): turned to +Y.
+        let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
+        for mesh in [&can, &cap, &disc] {
+            let built = mesh.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
+            let to_y = axis_to_y(&built);
+            let axis = to_y * (turn * Vec3::Y);
+            assert!(axis.y.abs() > 0.9999, "the axis goes to {axis}");
+        }
+    }
+
     /// A 160x120 camera 0.45 m in front of the origin at `height`, looking
     /// at the point `target_height` above the origin.
     fn camera(height: f32, target_height: f32) -> Camera {
@@ -314,6 +470,7 @@ mod tests {
             ("lying at -60 deg", lying(-1.05)),
             ("leaning", Quat::from_rotation_z(0.6)),
             ("lying end-on", Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+            ("standing on its top", Quat::from_rotation_x(std::f32::consts::PI)),
         ];
         for (name, rotation) in cases {
             let truth = Pose::new(
@@ -323,13 +480,21 @@ mod tests {
             );
             let mask = can_mask(&probe, &camera, &truth);
             let shape = MaskShape::new(&mask).expect("a mask");
-            let axes = axis_hypotheses(&camera, &shape, &probe.mesh);
+            // A probe standing on its top is hypothesised as such only when
+            // its top is not known (the upside-down twins of the upright
+            // hypothesis cover it otherwise).
+            let top_known = name != "standing on its top";
+            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, top_known);
             let true_axis = rotation * Vec3::Y;
             let best = axes
                 .iter()
                 .map(|a| a.dot(true_axis).clamp(-1.0, 1.0).acos().to_degrees())
                 .fold(f32::INFINITY, f32::min);
-            assert!(axes.len() <= 5, "{name}: {} hypotheses", axes.len());
+            assert!(
+                axes.len() <= 5 + !top_known as usize,
+                "{name}: {} hypotheses",
+                axes.len()
+            );
             assert!(
                 best < 30.0,
                 "{name}: nearest hypothesis {best} deg from the axis ({axes:?})"

@@ -634,6 +634,11 @@ pub struct Report {
     pub working_resolution: (usize, usize),
     /// The smallest roughness of the probe, which set it.
     pub min_roughness: f32,
+    /// The probe's axis, mesh coordinates: what the search turns the probe
+    /// about (`init::axis_to_y`). The poses of `axes`, `starts` and
+    /// `phases` are of the mesh turned to put it along +Y (the mesh as it
+    /// is when its axis is +Y); `pose.json` is of the mesh as it is.
+    pub probe_axis: [f32; 3],
     /// The photo as the estimate worked on it.
     pub working_image: WorkingImage,
     /// Pixels excluded as clipped (over-exposed), of the working image.
@@ -924,6 +929,8 @@ fn psnr(rendered: &[[f64; 3]], target: &[[f64; 3]], used: &[f64]) -> f64 {
 struct Probe<'a> {
     asset: &'a ProbeAsset,
     edges: EdgeAdjacency,
+    /// Whether mesh +Y is the probe's top (see `init::axis_hypotheses`).
+    top_known: bool,
 }
 
 /// The lighting at `pose`: primary hits, the light transport onto a
@@ -1559,7 +1566,7 @@ fn search_pose(
     };
     let mesh = &probe.asset.mesh;
     let shape = init::MaskShape::new(&photo.mask)?;
-    let hypotheses = init::axis_hypotheses(&photo.camera, &shape, mesh);
+    let hypotheses = init::axis_hypotheses(&photo.camera, &shape, mesh, probe.top_known);
     phases.expect_more(hypotheses.len() - 1);
     // Hypotheses and starts are independent and each one's small pose tapes
     // keep about one core busy: they run side by side (results do not
@@ -1979,9 +1986,28 @@ pub fn estimate_with_progress(
             format!("{out_w}x{out_h} is not a 2:1 map"),
         ));
     }
+    // The search turns the probe about mesh +Y and reads its length along
+    // it: a probe built along another axis is turned to +Y first
+    // (`init::axis_to_y`), and its poses turned back at the end.
+    let to_y = init::axis_to_y(&asset.mesh);
+    let turned;
+    let asset = match to_y == Quat::IDENTITY {
+        true => asset,
+        false => {
+            turned = ProbeAsset {
+                mesh: asset.mesh.posed(&Pose::new(to_y, 1.0, Vec3::ZERO)),
+                ..asset.clone()
+            };
+            &turned
+        }
+    };
+    let known_pose = settings
+        .known_pose
+        .map(|pose| Pose::new(pose.rotation * to_y.inverse(), pose.scale, pose.translation));
     let probe = Probe {
         asset,
         edges: EdgeAdjacency::new(&asset.mesh),
+        top_known: to_y == Quat::IDENTITY,
     };
     // The photo as the estimate works on it (box-filtered when its mask
     // holds more pixels than `working_mask_pixels`).
@@ -2004,7 +2030,7 @@ pub fn estimate_with_progress(
         expected: settings.phase_count(),
         on_phase,
     };
-    let (pose, axes, starts, chosen) = match settings.known_pose {
+    let (pose, axes, starts, chosen) = match known_pose {
         Some(pose) => (pose, Vec::new(), Vec::new(), None),
         None => {
             let search = search_pose(&probe, photo, &reference, &clipped, work, settings, &mut phases)?;
@@ -2045,7 +2071,7 @@ pub fn estimate_with_progress(
             phases.push(lighting_report("lighting_pilot", &fit, t1));
             // The pilot's transport goes before the searches' are built.
             let (mut pose, mut map) = (pose, fit.into_map());
-            let searched = settings.known_pose.is_none();
+            let searched = known_pose.is_none();
             let mut search =
                 |phase: &str, (step, reach): (f32, f32), pixels: Pixels, candidate: &dyn Fn(&Pose, f32) -> Pose| {
                     if !searched || step <= 0.0 {
@@ -2146,6 +2172,7 @@ pub fn estimate_with_progress(
         lean,
         working_resolution: work,
         min_roughness,
+        probe_axis: (to_y.inverse() * Vec3::Y).to_array(),
         working_image: WorkingImage {
             factor,
             size: (photo.mask.width, photo.mask.height),
@@ -2160,7 +2187,12 @@ pub fn estimate_with_progress(
     Ok(Estimate {
         env,
         confidence,
-        pose,
+        // A known pose as given; a found one of the mesh as it is.
+        pose: match (settings.known_pose, to_y == Quat::IDENTITY) {
+            (Some(known), _) => known,
+            (None, true) => pose,
+            (None, false) => Pose::new(pose.rotation * to_y, pose.scale, pose.translation),
+        },
         rerender,
         report,
     })
