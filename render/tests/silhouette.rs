@@ -80,10 +80,15 @@ fn reference_at(mesh: &Mesh, pose: &Pose) -> ReferenceMask {
 /// A sphere 29 px across with a pole facing the camera: its thin polar triangles stay inside,
 /// away from the band.
 fn sphere() -> Mesh {
+    sphere_of(32, 16)
+}
+
+/// A sphere of radius 0.06 m in `segments x rings` quads.
+fn sphere_of(segments: u32, rings: u32) -> Mesh {
     UvSphere {
         radius: 0.06,
-        segments: 32,
-        rings: 16,
+        segments,
+        rings,
         ..UvSphere::default()
     }
     .build()
@@ -513,15 +518,7 @@ fn an_uncovered_pixel_takes_its_distance_to_the_nearest_front_triangle_of_a_dens
     // triangle shares), in grids sized to the mesh's density: a sphere of 32k triangles, 29 px
     // across (a triangle a tenth of a pixel wide), and the can. Brute force over every front
     // triangle must agree on every uncovered band pixel.
-    let dense = UvSphere {
-        radius: 0.06,
-        segments: 128,
-        rings: 128,
-        ..UvSphere::default()
-    }
-    .build()
-    .mesh;
-    for (mesh, pose) in [(dense, sphere_pose()), (can(), base_pose())] {
+    for (mesh, pose) in [(sphere_of(128, 128), sphere_pose()), (can(), base_pose())] {
         let plan = plan_at(&mesh, &pose, SMOOTH);
         let tape = Tape::<f64>::new();
         let posed = PosedMesh::new(
