@@ -89,8 +89,8 @@ fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
                 continue;
             }
             let theta = 0.5 * (a[q][q] - a[p][p]) / a[p][q];
+            // The smaller root of t^2 + 2 theta t - 1 = 0 (1 for theta 0).
             let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
             let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
             // A <- J^T A J and V <- V J, J the rotation in the (p, q) plane.
             let rotate_columns = |m: &mut [[f64; 3]; 3]| {

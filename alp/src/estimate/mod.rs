@@ -1990,24 +1990,25 @@ pub fn estimate_with_progress(
     // it: a probe built along another axis is turned to +Y first
     // (`init::axis_to_y`), and its poses turned back at the end.
     let to_y = init::axis_to_y(&asset.mesh);
+    let built_along_y = to_y == Quat::IDENTITY;
     let turned;
-    let asset = match to_y == Quat::IDENTITY {
-        true => asset,
+    let (asset, known_pose) = match built_along_y {
+        true => (asset, settings.known_pose),
         false => {
             turned = ProbeAsset {
                 mesh: asset.mesh.posed(&Pose::new(to_y, 1.0, Vec3::ZERO)),
                 ..asset.clone()
             };
-            &turned
+            let known = settings
+                .known_pose
+                .map(|pose| Pose::new(pose.rotation * to_y.inverse(), pose.scale, pose.translation));
+            (&turned, known)
         }
     };
-    let known_pose = settings
-        .known_pose
-        .map(|pose| Pose::new(pose.rotation * to_y.inverse(), pose.scale, pose.translation));
     let probe = Probe {
         asset,
         edges: EdgeAdjacency::new(&asset.mesh),
-        top_known: to_y == Quat::IDENTITY,
+        top_known: built_along_y,
     };
     // The photo as the estimate works on it (box-filtered when its mask
     // holds more pixels than `working_mask_pixels`).
@@ -2188,7 +2189,7 @@ pub fn estimate_with_progress(
         env,
         confidence,
         // A known pose as given; a found one of the mesh as it is.
-        pose: match (settings.known_pose, to_y == Quat::IDENTITY) {
+        pose: match (settings.known_pose, built_along_y) {
             (Some(known), _) => known,
             (None, true) => pose,
             (None, false) => Pose::new(pose.rotation * to_y, pose.scale, pose.translation),
