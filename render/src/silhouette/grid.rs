@@ -1,11 +1,12 @@
-//! A uniform grid of axis-aligned boxes over the image, so that the candidates near a pixel cost
-//! what is near it: the plan's work follows the silhouette's length, not pixels x triangles.
+//! A uniform grid of axis-aligned boxes over the part of the image they span, so that the
+//! candidates near a pixel cost what is near it: the plan's work follows the silhouette's length,
+//! not pixels x triangles, however dense the mesh.
 
 use glam::Vec2;
 
 /// Items (triangles, edges) bucketed by the grid cells their boxes overlap, in CSR layout.
 ///
-/// The grid spans the items' boxes (within the image), with cells sized to the items' density.
+/// The grid spans the items' boxes (within the image), with cells sized to the items.
 /// Boxes and queries beyond it are clamped to it: projection onto a box is non-expansive, so an
 /// item in a border cell is never closer to a query than that cell is, and the nearest-item
 /// search stays exact for a query anywhere.
