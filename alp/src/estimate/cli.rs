@@ -135,6 +135,13 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     });
     bar.finish_and_clear();
     let result = result?;
+    let on_border = result.report.mask_on_border_pixels;
+    if on_border > 0 {
+        eprintln!(
+            "alp: warning: {on_border} pixels of the mask lie on the image's border: if the probe is cut there, \
+             its pose (and the lighting with it) may be wrong"
+        );
+    }
     if verbose {
         for p in &result.report.phases {
             eprintln!("  {:<15} {:>4} evals {:>7.2} s", p.name, p.evaluations, p.wall_s);

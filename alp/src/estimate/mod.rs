@@ -350,6 +350,15 @@ impl Settings {
     }
 }
 
+/// How many of the mask's pixels lie on the image's outermost rows and
+/// columns.
+pub fn mask_on_border(mask: &Mask) -> usize {
+    let (w, h) = (mask.width, mask.height);
+    (0..w * h)
+        .filter(|&i| mask.inside[i] && (i % w == 0 || i % w == w - 1 || i / w == 0 || i / w == h - 1))
+        .count()
+}
+
 /// Samples per pixel of the re-render at the photo's size when the
 /// estimate worked on a box-filtered photo.
 const RERENDER_SPP: u32 = 8;
@@ -639,6 +648,12 @@ pub struct Report {
     /// `phases` are of the mesh turned to put it along +Y (the mesh as it
     /// is when its axis is +Y); `pose.json` is of the mesh as it is.
     pub probe_axis: [f32; 3],
+    /// Mask pixels on the photo's border: the probe may be cut by it, and
+    /// the search then reads the border as the probe's outline. On a can cut
+    /// by the border (`alp render` of a suite scene with the camera turned
+    /// away) the pose was lost: rotation 179 deg (its turn), mirror 10.6
+    /// deg; only touching it, 17.5 mm and a scale 4 % short.
+    pub mask_on_border_pixels: usize,
     /// The photo as the estimate worked on it.
     pub working_image: WorkingImage,
     /// Pixels excluded as clipped (over-exposed), of the working image.
@@ -2174,6 +2189,7 @@ pub fn estimate_with_progress(
         working_resolution: work,
         min_roughness,
         probe_axis: (to_y.inverse() * Vec3::Y).to_array(),
+        mask_on_border_pixels: mask_on_border(&full.mask),
         working_image: WorkingImage {
             factor,
             size: (photo.mask.width, photo.mask.height),
@@ -2271,6 +2287,20 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn mask_pixels_on_the_border_are_counted_on_all_four_sides_and_only_there() {
+        let (w, h) = (6, 5);
+        let count = |marked: &[usize]| {
+            let mut inside = vec![false; w * h];
+            marked.iter().for_each(|&i| inside[i] = true);
+            mask_on_border(&Mask::new(w, h, inside))
+        };
+        // The interior, then one pixel on each side, then a corner.
+        assert_eq!(count(&[7, 8, 9, 13, 14, 15, 19, 20, 21]), 0);
+        assert_eq!(count(&[2, 6, 11, 27]), 4);
+        assert_eq!(count(&[0, 14]), 1);
     }
 
     #[test]
