@@ -454,7 +454,6 @@ impl Photo {
                     let (lo, hi) = (first + b as f64 * factor, first + (b + 1) as f64 * factor);
                     (lo.floor() as usize..(hi.ceil() as usize).min(n))
                         .map(|j| (j, hi.min(j as f64 + 1.0) - lo.max(j as f64)))
-                        .filter(|&(_, overlap)| overlap > 0.0)
                         .collect()
                 })
                 .collect()
@@ -469,6 +468,7 @@ impl Photo {
             self.camera.target,
             self.camera.up,
         )?;
+        let area = factor * factor;
         let mut pixels = Vec::with_capacity(bw * bh);
         let (mut inside, mut clipped_blocks) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
         for row in &rows {
@@ -482,7 +482,6 @@ impl Photo {
                         any_clipped |= clipped[i];
                     }
                 }
-                let area = factor * factor;
                 pixels.push(sum.map(|v| (v / area) as f32));
                 inside.push(2.0 * marked >= area);
                 clipped_blocks.push(any_clipped);

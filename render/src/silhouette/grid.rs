@@ -19,8 +19,8 @@ pub(crate) struct BoxGrid {
     /// Items of cell `c` are `items[start[c]..start[c + 1]]`.
     start: Vec<u32>,
     items: Vec<u32>,
-    /// Each item's box, by item: the nearest-item search skips an item whose box is no nearer
-    /// than the best found before paying for its distance.
+    /// The box of each entry of `items`, alongside it: the nearest-item search skips an item
+    /// whose box is no nearer than the best found before paying for its distance.
     boxes: Vec<(Vec2, Vec2)>,
 }
 
@@ -58,20 +58,18 @@ impl BoxGrid {
             count[c + 1] += count[c];
         }
         let mut fill = count.clone();
-        let mut items = vec![0u32; count[cols * rows] as usize];
+        let entries = count[cols * rows] as usize;
+        let (mut items, mut item_boxes) = (vec![0u32; entries], vec![(Vec2::ZERO, Vec2::ZERO); entries]);
         for &(item, lo, hi) in boxes {
             grid.for_cells(lo, hi, |c| {
                 items[fill[c] as usize] = item;
+                item_boxes[fill[c] as usize] = (lo, hi);
                 fill[c] += 1;
             });
         }
-        let mut by_item = vec![(Vec2::ZERO, Vec2::ZERO); boxes.iter().map(|b| b.0 as usize + 1).max().unwrap_or(0)];
-        boxes
-            .iter()
-            .for_each(|&(item, lo, hi)| by_item[item as usize] = (lo, hi));
         grid.start = count;
         grid.items = items;
-        grid.boxes = by_item;
+        grid.boxes = item_boxes;
         grid
     }
 
@@ -100,8 +98,12 @@ impl BoxGrid {
     }
 
     fn cell_items(&self, c: usize, r: usize) -> &[u32] {
+        &self.items[self.cell_range(c, r)]
+    }
+
+    fn cell_range(&self, c: usize, r: usize) -> std::ops::Range<usize> {
         let k = r * self.cols + c;
-        &self.items[self.start[k] as usize..self.start[k + 1] as usize]
+        self.start[k] as usize..self.start[k + 1] as usize
     }
 
     /// The item nearest to `p` by `distance2(item)` (a squared distance that is at least the
@@ -130,8 +132,8 @@ impl BoxGrid {
                 let mut col = pc as isize - r as isize;
                 while col <= (pc + r) as isize {
                     if col >= c0 as isize && col <= c1 as isize {
-                        for &item in self.cell_items(col as usize, row) {
-                            let (lo, hi) = self.boxes[item as usize];
+                        let range = self.cell_range(col as usize, row);
+                        for (&item, &(lo, hi)) in self.items[range.clone()].iter().zip(&self.boxes[range]) {
                             let to_box = (lo - p).max(p - hi).max(Vec2::ZERO).length_squared();
                             if to_box > within2 || best.is_some_and(|(_, b)| to_box >= b) {
                                 continue;
