@@ -138,8 +138,8 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     let on_border = result.report.mask_on_border_pixels;
     if on_border > 0 {
         eprintln!(
-            "alp: warning: {on_border} pixels of the mask lie on the image's border: if the probe is cut there, \
-             its pose (and the lighting with it) may be wrong"
+            "alp: warning: {on_border} pixels of the mask lie on the image's border: if the probe goes on beyond it, \
+             its hidden part is unseen and its pose (and the lighting with it) less certain"
         );
     }
     if verbose {

@@ -133,14 +133,23 @@ pub fn facing(camera: &Camera, axis: Vec3) -> Quat {
     Quat::from_mat3(&Mat3::from_cols(up.cross(toward), up, toward)).normalize()
 }
 
-/// The mask's barycenter, the diagonal of its bounding box (pixels), its
-/// principal direction (unit, image x right and y down) and elongation (the
-/// ratio of the standard deviations along and across that direction).
+/// The mask's barycenter, its bounding box (pixels), which of the image's
+/// sides it touches, its principal direction (unit, image x right and y
+/// down) and elongation (the ratio of the standard deviations along and
+/// across that direction).
 pub struct MaskShape {
     /// Barycenter, pixels.
     pub barycenter: Vec2,
-    /// Bounding box diagonal, pixels.
-    pub diagonal_px: f32,
+    /// Bounding box, pixel edges: the low corner of its first pixel and the
+    /// high corner of its last.
+    pub lo: Vec2,
+    /// See `lo`.
+    pub hi: Vec2,
+    /// Whether the mask reaches the image's low side along x and y (left,
+    /// top): the probe may go on beyond it.
+    pub cut_lo: [bool; 2],
+    /// Whether it reaches the high side (right, bottom).
+    pub cut_hi: [bool; 2],
     /// Direction of largest spread.
     pub principal: Vec2,
     /// Spread along the principal direction over the spread across it (>= 1).
@@ -178,9 +187,14 @@ impl MaskShape {
         let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
         let (major, minor) = (half_trace + root, (half_trace - root).max(1e-6));
         let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+        let (lo, hi) = (lo - Vec2::splat(0.5), hi + Vec2::splat(0.5));
+        let size = Vec2::new(mask.width as f32, mask.height as f32);
         Ok(MaskShape {
             barycenter,
-            diagonal_px: (hi - lo + Vec2::ONE).length(),
+            lo,
+            hi,
+            cut_lo: [lo.x <= 0.0, lo.y <= 0.0],
+            cut_hi: [hi.x >= size.x, hi.y >= size.y],
             principal: Vec2::new(angle.cos(), angle.sin()),
             elongation: (major / minor).sqrt(),
         })
@@ -200,7 +214,8 @@ const ROUND_MASK: f32 = 1.15;
 /// direction across it for one wider than long, both when neither), both
 /// ways, either in the image plane or lying on a horizontal surface (the
 /// same image direction, horizontal in the world); for a round mask, along
-/// the view ray both ways (a probe seen end-on). Upright is both ways too
+/// the view ray both ways (a probe seen end-on); for a mask the image's
+/// border cuts, all of these, along both of its directions. Upright is both ways too
 /// unless `top_known` (mesh +Y is the probe's top, as a probe standing on
 /// its -Y end is built; not so for one whose axis [`axis_to_y`] turned to
 /// +Y, whose ends are anyone's guess). Hypotheses within `SAME_AXIS_DEG`
@@ -212,29 +227,36 @@ pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_know
         true => vec![up],
         false => vec![up, -up],
     };
-    if shape.elongation > ROUND_MASK {
-        let (lo, hi) = mesh.bounds();
-        let (length, width) = (hi.y - lo.y, (hi.x - lo.x).max(hi.z - lo.z));
-        let across = Vec2::new(-shape.principal.y, shape.principal.x);
-        let directions = if length > ROUND_MASK * width {
-            vec![shape.principal]
-        } else if width > ROUND_MASK * length {
-            vec![across]
-        } else {
-            vec![shape.principal, across]
-        };
-        for image_dir in directions {
-            // Image y grows downwards.
-            let d = camera.right * image_dir.x - camera.image_up * image_dir.y;
-            let in_plane = (d - ray * ray.dot(d)).normalize();
-            candidates.extend([in_plane, -in_plane]);
-            let lying = ray.cross(d).cross(up);
-            if lying.length() > 1e-3 {
-                let lying = lying.normalize() * lying.dot(d).signum();
-                candidates.extend([lying, -lying]);
-            }
-        }
+    let (lo, hi) = mesh.bounds();
+    let (length, width) = (hi.y - lo.y, (hi.x - lo.x).max(hi.z - lo.z));
+    let across = Vec2::new(-shape.principal.y, shape.principal.x);
+    let round = shape.elongation <= ROUND_MASK;
+    // A mask the image's border cuts shows neither the probe's proportions
+    // nor whether it is round: every direction is tried.
+    let cut = shape.cut_lo.iter().chain(&shape.cut_hi).any(|&c| c);
+    let directions = if cut {
+        vec![shape.principal, across]
+    } else if round {
+        vec![]
+    } else if length > ROUND_MASK * width {
+        vec![shape.principal]
+    } else if width > ROUND_MASK * length {
+        vec![across]
     } else {
+        vec![shape.principal, across]
+    };
+    for image_dir in directions {
+        // Image y grows downwards.
+        let d = camera.right * image_dir.x - camera.image_up * image_dir.y;
+        let in_plane = (d - ray * ray.dot(d)).normalize();
+        candidates.extend([in_plane, -in_plane]);
+        let lying = ray.cross(d).cross(up);
+        if lying.length() > 1e-3 {
+            let lying = lying.normalize() * lying.dot(d).signum();
+            candidates.extend([lying, -lying]);
+        }
+    }
+    if round || cut {
         candidates.extend([-ray, ray]);
     }
     let cos_same = SAME_AXIS_DEG.to_radians().cos();
@@ -250,24 +272,51 @@ pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_know
 /// The starting pose with the probe's axis along `axis`, facing the camera:
 /// the depth from the probe's known size, as it shows in that orientation,
 /// against the mask's extent; the position on the mask's barycenter.
+///
+/// A mask that reaches a side of the image may belong to a probe going on
+/// beyond it, whose extent and barycenter it understates: the depth then
+/// comes from the extent across the other way, if the mask spans it whole
+/// (else from the extent that says nearer), and the probe's outline is
+/// lined up with the mask's edge opposite the cut instead of centred on its
+/// barycenter.
 pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3) -> Pose {
     let rotation = facing(camera, axis);
     // The extent of the turned mesh across the view (orthographic: the
-    // probe is small against its distance).
+    // probe is small against its distance), image x right and y up.
+    let on_image = |q: Vec3| Vec2::new(camera.right.dot(q), camera.image_up.dot(q));
     let (lo, hi) = mesh.positions.iter().fold(
         (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)),
         |(lo, hi), &p| {
-            let q = rotation * p;
-            let on_image = Vec2::new(camera.right.dot(q), camera.image_up.dot(q));
-            (lo.min(on_image), hi.max(on_image))
+            let q = on_image(rotation * p);
+            (lo.min(q), hi.max(q))
         },
     );
-    let diagonal_m = (hi - lo).length();
     let focal_px = 0.5 * camera.height as f32 / (0.5 * camera.fov_y_deg.to_radians()).tan();
-    let depth = focal_px * diagonal_m / shape.diagonal_px;
+    let (extent_m, extent_px) = (hi - lo, shape.hi - shape.lo);
+    let whole = [0, 1].map(|k| !shape.cut_lo[k] && !shape.cut_hi[k]);
+    let depth = match whole {
+        [true, true] => focal_px * extent_m.length() / extent_px.length(),
+        [true, false] => focal_px * extent_m.x / extent_px.x,
+        [false, true] => focal_px * extent_m.y / extent_px.y,
+        [false, false] => focal_px * (extent_m / extent_px).min_element(),
+    };
     let (mesh_lo, mesh_hi) = mesh.bounds();
     let centre = 0.5 * (mesh_lo + mesh_hi);
-    let dir = camera.direction_through(shape.barycenter);
+    // Where the turned mesh's centre projects (pixels, y down), and how far
+    // its outline reaches from there towards the image's low and high sides.
+    let mut at = shape.barycenter;
+    let c = on_image(rotation * centre);
+    let px_per_m = focal_px / depth;
+    let reach_lo = Vec2::new(c.x - lo.x, hi.y - c.y) * px_per_m;
+    let reach_hi = Vec2::new(hi.x - c.x, c.y - lo.y) * px_per_m;
+    for k in 0..2 {
+        match (shape.cut_lo[k], shape.cut_hi[k]) {
+            (true, false) => at[k] = shape.hi[k] - reach_hi[k],
+            (false, true) => at[k] = shape.lo[k] + reach_lo[k],
+            _ => {}
+        }
+    }
+    let dir = camera.direction_through(at);
     let translation = camera.origin + dir * (depth / dir.dot(camera.forward)) - rotation * centre;
     Pose::new(rotation, 1.0, translation)
 }
@@ -454,6 +503,48 @@ mod tests {
             axis.dot(truth.rotation * Vec3::Y) > 0.95,
             "the start stands upright: {axis}"
         );
+    }
+
+    #[test]
+    fn a_can_cut_by_any_side_of_the_photo_starts_where_it_shows_and_its_axis_is_a_hypothesis() {
+        let probe = SodaCan::default().build();
+        let truth = Pose::new(Quat::from_rotation_y(0.4), 1.0, Vec3::ZERO);
+        let centre = Vec3::new(0.0, 0.061, 0.0);
+        // The camera looks past the can, which reaches beyond the photo's
+        // right, left, bottom or top side by about a third of its extent.
+        for (target, cut) in [
+            (Vec3::new(-0.205, 0.061, 0.0), "right"),
+            (Vec3::new(0.205, 0.061, 0.0), "left"),
+            (Vec3::new(0.0, 0.205, 0.0), "bottom"),
+            (Vec3::new(0.0, -0.083, 0.0), "top"),
+        ] {
+            let camera = Camera::new(160, 120, 40.0, Vec3::new(0.0, 0.1, 0.45), target, Vec3::Y).expect("camera");
+            let mask = can_mask(&probe, &camera, &truth);
+            let shape = MaskShape::new(&mask).expect("a mask");
+            let flags = [shape.cut_lo[0], shape.cut_hi[0], shape.cut_lo[1], shape.cut_hi[1]];
+            let expected = ["left", "right", "top", "bottom"].map(|side| side == cut);
+            assert_eq!(flags, expected, "the can reaches the {cut} side only");
+            let start = initial_pose(&probe.mesh, &camera, &shape, camera.up);
+            let shown = |pose: &Pose| camera.project(pose.transform_point(centre)).expect("in front");
+            // Measured 0.9 to 1.3 px off and 0.95 to 0.97 of the depth;
+            // started as a whole mask is (on its barycenter, the depth from
+            // its diagonal), 4.3 to 8.7 px and 1.00 to 1.39.
+            let off = (shown(&start) - shown(&truth)).length();
+            assert!(off < 2.5, "cut at the {cut}: the start's centre shows {off} px off");
+            let depth = |pose: &Pose| (pose.transform_point(centre) - camera.origin).dot(camera.forward);
+            let ratio = depth(&start) / depth(&truth);
+            assert!(
+                (ratio - 1.0).abs() < 0.06,
+                "cut at the {cut}: depth {ratio} of the truth's"
+            );
+            // A cut mask shows no proportions: the can lying across the
+            // image is tried too, though its mask stands taller than wide.
+            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, true);
+            assert!(
+                axes.iter().any(|a| a.x.abs() > 0.97),
+                "cut at the {cut}: no axis across the image among {axes:?}"
+            );
+        }
     }
 
     #[test]

@@ -647,11 +647,10 @@ pub struct Report {
     /// `phases` are of the mesh turned to put it along +Y (the mesh as it
     /// is when its axis is +Y); `pose.json` is of the mesh as it is.
     pub probe_axis: [f32; 3],
-    /// Mask pixels on the photo's border: the probe may be cut by it, and
-    /// the search then reads the border as the probe's outline. On a can cut
-    /// by the border (`alp render` of a suite scene with the camera turned
-    /// away) the pose was lost: rotation 179 deg (its turn), mirror 10.6
-    /// deg; only touching it, 17.5 mm and a scale 4 % short.
+    /// Mask pixels on the photo's border: the probe may go on beyond it
+    /// (the start and the axis hypotheses allow for that:
+    /// [`init::initial_pose`], [`init::axis_hypotheses`]), and what lies
+    /// beyond is unseen.
     pub mask_on_border_pixels: usize,
     /// The photo as the estimate worked on it.
     pub working_image: WorkingImage,
