@@ -43,7 +43,7 @@ def principled_dict(mi, probe):
 
 def render(mi, probe, pose, cam, env, spp, max_depth, seed, pass_samples=1 << 22, rfilter="box"):
     """The photo (H x W x 3, black background) by Mitsuba's path tracer, averaged over passes of
-    bounded memory."""
+    bounded memory, and the probe's coverage of each pixel (H x W, the film's alpha)."""
     crop = am.probe_bbox(cam, probe, pose)
     x0, y0, x1, y1 = crop
     per_pass = max(1, min(spp, pass_samples // max((x1 - x0) * (y1 - y0), 1)))
@@ -56,12 +56,24 @@ def render(mi, probe, pose, cam, env, spp, max_depth, seed, pass_samples=1 << 22
     while done < spp:
         n = min(per_pass, spp - done)
         img = np.array(mi.render(scene, seed=seed * 7919 + k, spp=n), dtype=np.float64)
-        total = total + img[:, :, :3] * n
+        total = total + img[:, :, :4] * n
         done += n
         k += 1
-    out = np.zeros((cam["height"], cam["width"], 3))
+    out = np.zeros((cam["height"], cam["width"], 4))
     out[y0:y1, x0:x1] = total / spp
-    return out
+    return out[:, :, :3], out[:, :, 3]
+
+
+def env_background(cam, env, per_side=4):
+    """The env map as the camera sees it behind the probe: each pixel the mean of per_side^2
+    stratified rays (the box filter's pixel mean)."""
+    h, w = cam["height"], cam["width"]
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
+    total = np.zeros((h, w, 3))
+    for k in range(per_side * per_side):
+        dx, dy = ((k % per_side) + 0.5) / per_side, ((k // per_side) + 0.5) / per_side
+        total += am.env_lookup(env, am.camera_rays(cam, cols + dx, rows + dy))
+    return total / (per_side * per_side)
 
 
 def sensor(image, noise, clip, seed):
@@ -88,6 +100,10 @@ def main():
     ap.add_argument("--rfilter", default="box", choices=["box", "gaussian"],
                     help="the film's reconstruction filter: ours is a box (the pixel's mean); Mitsuba's "
                          "default, a Gaussian (stddev 0.5 px), blurs the photo past the pixel")
+    ap.add_argument("--background", default="black", choices=["black", "env"],
+                    help="what lies behind the probe: nothing, or the env map as the camera sees it "
+                         "(composited by the film's alpha; a photo's edges then have a background "
+                         "to stand against)")
     args = ap.parse_args()
     mi = am.setup_variant(args.variant)
     os.makedirs(args.out, exist_ok=True)
@@ -110,8 +126,10 @@ def main():
         cam = am.load_camera(os.path.join(src, "camera.json"))
         pose = am.load_pose(os.path.join(src, "pose.json"))
         env = am.read_exr(os.path.join(src, "gt_env.exr"))
-        image = render(mi, probes[kind], pose, cam, env, args.spp, args.max_depth, meta["seed"],
-                       rfilter=args.rfilter)
+        image, alpha = render(mi, probes[kind], pose, cam, env, args.spp, args.max_depth, meta["seed"],
+                              rfilter=args.rfilter)
+        if args.background == "env":
+            image = image + (1.0 - alpha[..., None]) * env_background(cam, env)
         image = sensor(image, meta.get("noise") or 0.0, meta.get("exposure_clip"), meta["seed"])
         tmp = dst + ".tmp"
         shutil.rmtree(tmp, ignore_errors=True)
@@ -119,7 +137,8 @@ def main():
         for f in FILES_KEPT:
             shutil.copy(os.path.join(src, f), tmp)
         am.write_exr(os.path.join(tmp, "image.exr"), image)
-        meta.update({"renderer": "mitsuba path, max_depth %d, %s filter" % (args.max_depth, args.rfilter),
+        meta.update({"renderer": "mitsuba path, max_depth %d, %s filter, %s background"
+                                 % (args.max_depth, args.rfilter, args.background),
                      "mitsuba_spp": args.spp,
                      "mitsuba_s": round(time.time() - t0, 2)})
         with open(os.path.join(tmp, "scene.json"), "w") as f:
