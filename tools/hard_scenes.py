@@ -46,16 +46,16 @@ def probe_arg(scene):
     return folder if os.path.isdir(folder) else kind
 
 
-def render(alp, scene, camera, out_dir, spp, image="image.exr", mask="mask.png"):
-    """Our render of the scene's probe through `camera`; returns the mask."""
-    cam_path = os.path.join(out_dir, "camera.json" if image == "image.exr" else "wide.json")
-    with open(cam_path, "w") as f:
+def render(alp, scene, camera, spp, out_dir, stem=""):
+    """Our render of the scene's probe through `camera` into out_dir: STEMcamera.json,
+    STEMimage.exr (and its preview STEMimage.png), STEMmask.png; returns the mask."""
+    paths = [os.path.join(out_dir, stem + f) for f in ("camera.json", "image.exr", "mask.png")]
+    with open(paths[0], "w") as f:
         json.dump(camera, f, indent=1)
     subprocess.run([alp, "render", "--probe", probe_arg(scene), "--pose", os.path.join(scene, "pose.json"),
-                    "--camera", cam_path, "--env", os.path.join(scene, "gt_env.exr"),
-                    "--out", os.path.join(out_dir, image), "--spp", str(spp),
-                    "--mask-out", os.path.join(out_dir, mask)], check=True, capture_output=True)
-    return am.read_mask(os.path.join(out_dir, mask))
+                    "--camera", paths[0], "--env", os.path.join(scene, "gt_env.exr"),
+                    "--out", paths[1], "--spp", str(spp), "--mask-out", paths[2]], check=True, capture_output=True)
+    return am.read_mask(paths[2])
 
 
 def focal_px(cam):
@@ -67,9 +67,9 @@ def whole_extent(alp, scene, cam, out_dir):
     rendered on a canvas three times as large with the same focal length."""
     wide = dict(cam, width=3 * cam["width"], height=3 * cam["height"])
     wide["fov_y_deg"] = math.degrees(2 * math.atan(1.5 * cam["height"] / focal_px(cam)))
-    m = render(alp, scene, wide, out_dir, 4, "wide.exr", "wide.png")
-    for f in ("wide.exr", "wide.png", "wide.json"):
-        os.remove(os.path.join(out_dir, f))
+    m = render(alp, scene, wide, 4, out_dir, "wide_")
+    for f in ("camera.json", "image.exr", "image.png", "mask.png"):
+        os.remove(os.path.join(out_dir, "wide_" + f))
     ys, xs = np.nonzero(m)
     if len(xs) == 0:
         sys.exit("%s: the probe is not in view" % scene)
@@ -151,7 +151,7 @@ def main():
         shutil.rmtree(tmp, ignore_errors=True)
         os.makedirs(tmp)
         cam = cut_camera(args.alp, scene, how[1], how[2], tmp) if how[0] == "cut" else far_camera(scene, how[1])
-        mask = render(args.alp, scene, cam, tmp, SPP)
+        mask = render(args.alp, scene, cam, SPP, tmp)
         for f in KEPT:
             shutil.copy(os.path.join(scene, f), tmp)
         kind = open(os.path.join(scene, "probe.txt")).read().strip()
