@@ -735,8 +735,8 @@ pub fn light_samples_with<'t, T: Real>(
     // The BRDF sample's throughput before its shadow and MIS weight.
     let weight = sample.weight.map(|w| w * scale);
     let lights = sampling.env.map(|sampler| {
-        let lights = per_pixel_draws(hits, &(0..hits.len()).collect::<Vec<_>>(), LIGHT_STREAM, |rng| {
-            sampler.sample(rng.next_2d())
+        let lights = per_pixel_draws(hits, &(0..hits.len()).collect::<Vec<_>>(), LIGHT_STREAM, |u| {
+            sampler.sample(u)
         });
         (sampler, lights)
     });
@@ -841,21 +841,25 @@ fn vec3_at<T: Real>(xyz: &[Vec<T>; 3], i: usize) -> Vec3 {
     Vec3::from_array(xyz.each_ref().map(|c| c[i].to_f32().unwrap_or(f32::NAN)))
 }
 
-/// One draw per listed hit sample (`samples`, in order) from its pixel's
-/// random number stream `stream + pixel`, the pixel's samples in order: the
-/// same whatever the thread count.
+/// One draw per listed hit sample (`samples`, in order) from a point of
+/// the unit square, a pixel's points stratified over its listed samples
+/// ([`stratified_square`] from the random number stream `stream + pixel`):
+/// the same whatever the thread count. A pixel's few light samples spread
+/// over the square as its BRDF samples do, instead of clumping where
+/// independent draws fall.
 fn per_pixel_draws<D: Send>(
     hits: &PrimaryHits,
     samples: &[usize],
     stream: u64,
-    draw: impl Fn(&mut Rng) -> D + Sync,
+    draw: impl Fn(Vec2) -> D + Sync,
 ) -> Vec<D> {
     let runs: Vec<&[usize]> = samples.chunk_by(|&a, &b| hits.segment[a] == hits.segment[b]).collect();
     runs.par_iter()
         .flat_map_iter(|run| {
             let pixel = hits.pixels[hits.segment[run[0]] as usize] as u64;
-            let mut rng = Rng::new(hits.seed, stream + pixel);
-            run.iter().map(|_| draw(&mut rng)).collect::<Vec<_>>()
+            let mut points = vec![Vec2::ZERO; run.len()];
+            stratified_square(&mut Rng::new(hits.seed, stream + pixel), &mut points);
+            points.into_iter().map(&draw)
         })
         .collect()
 }
@@ -910,7 +914,7 @@ fn bounce<'t, T: Real>(
     let hit = SurfaceHit::find(origin, ray, corners, posed.positions);
     let shading = Shading::at(&hit, -ray, probe, posed);
     let samples: Vec<usize> = blocked.iter().map(|b| b.0).collect();
-    let random = per_pixel_draws(hits, &samples, BOUNCE_STREAM, |rng| rng.next_2d());
+    let random = per_pixel_draws(hits, &samples, BOUNCE_STREAM, |u| u);
     let random = [0, 1].map(|k| tape.constant(&random.iter().map(|r| T::c(r[k] as f64)).collect::<Vec<T>>()));
     let sample = bsdf.sample(&shading.surface, shading.wo, random);
     let wi = shading.to_world(sample.wi);
@@ -922,7 +926,7 @@ fn bounce<'t, T: Real>(
     // The first sample's throughput, then the second point's visibility.
     let weight = first.weight.map(|w| at_samples(w, idx) * shading.visibility);
     let lights = sampler.map(|sampler| {
-        let lights = per_pixel_draws(hits, &samples, BOUNCE_LIGHT_STREAM, |rng| sampler.sample(rng.next_2d()));
+        let lights = per_pixel_draws(hits, &samples, BOUNCE_LIGHT_STREAM, |u| sampler.sample(u));
         (sampler, lights)
     });
     let points = PointSamples {

@@ -424,15 +424,7 @@ fn grad_scene_from(textured: bool, eye: Vec3) -> GradScene {
     let camera = Camera::new(12, 16, 30.0, eye, Vec3::new(0.0, 0.6, 0.0), Vec3::Y).expect("camera");
     let pose = Pose::new(Quat::from_rotation_y(0.3), 10.0, Vec3::new(0.0, 0.0, 0.2));
     let env = smooth_env(32);
-    let tape = Tape::<f32>::new();
-    let mesh = MeshVars::new(&tape, &probe.mesh);
-    let posed = PosedMesh::new(&mesh, &PoseVars::new(&tape, &pack_pose(&pose), false));
-    let hits = PrimaryHits::trace(
-        &probe.mesh,
-        &posed.position_values(),
-        &camera,
-        &RenderSettings { spp: 2, seed: 5 },
-    );
+    let hits = trace(&probe, &pose, &camera, 2);
     assert!(hits.len() > 50, "the can must cover some pixels: {}", hits.len());
     GradScene {
         probe,
@@ -441,6 +433,19 @@ fn grad_scene_from(textured: bool, eye: Vec3) -> GradScene {
         env,
         hits,
     }
+}
+
+/// `probe`'s hits at `pose`, `spp` rays through each pixel of `camera`.
+fn trace(probe: &ProbeAsset, pose: &Pose, camera: &Camera, spp: u32) -> PrimaryHits {
+    let tape = Tape::<f32>::new();
+    let mesh = MeshVars::new(&tape, &probe.mesh);
+    let posed = PosedMesh::new(&mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
+    PrimaryHits::trace(
+        &probe.mesh,
+        &posed.position_values(),
+        camera,
+        &RenderSettings { spp, seed: 5 },
+    )
 }
 
 impl GradScene {
@@ -531,6 +536,36 @@ fn env_sampled_marks_the_samples_the_env_map_sampler_drew() {
         elsewhere > all / 10,
         "BRDF samples outside the patch: {elsewhere} of {all}"
     );
+}
+
+#[test]
+fn a_pixel_s_env_map_samples_are_stratified() {
+    // Under a constant map the sampler's second number sets the azimuth
+    // alone, evenly: a pixel's n env-map samples, stratified, leave no
+    // azimuth gap of 2/n (each of n equal strata holds one). Independent
+    // draws leave one in most pixels.
+    let mut g = grad_scene(false);
+    let n = 16;
+    g.hits = trace(&g.probe, &g.pose, &g.camera, n);
+    let env = EnvMap::new(16, 8, vec![[1.0; 3]; 128]).expect("env");
+    let sampler = EnvSampler::new(&env);
+    let tape = Tape::<f64>::new();
+    let samples = light_samples_of(&tape, &g, &LightSampling::mis(&sampler));
+    let wi = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
+    let segment = tape.to_vec(samples.segment);
+    let mut azimuths = vec![Vec::new(); g.hits.pixels.len()];
+    for k in (0..samples.direct).filter(|&k| samples.env_sampled[k]) {
+        let turn = (wi[0][k].atan2(-wi[2][k]) / std::f64::consts::TAU).rem_euclid(1.0);
+        azimuths[segment[k] as usize].push(turn);
+    }
+    let whole: Vec<&mut Vec<f64>> = azimuths.iter_mut().filter(|a| a.len() == n as usize).collect();
+    assert!(whole.len() > 50, "pixels with {n} samples: {}", whole.len());
+    for a in whole {
+        a.sort_by(f64::total_cmp);
+        let wrap = a[0] + 1.0 - a[a.len() - 1];
+        let widest = a.windows(2).map(|w| w[1] - w[0]).fold(wrap, f64::max);
+        assert!(widest < 2.0 / n as f64, "azimuths {a:?} leave a gap of {widest}");
+    }
 }
 
 #[test]
