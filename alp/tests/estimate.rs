@@ -133,6 +133,32 @@ fn bad_photos_are_clear_errors() {
 }
 
 #[test]
+fn bad_settings_are_clear_errors() {
+    let (probe, _, photo, settings) = scene();
+    let refused = |settings: &Settings| {
+        estimate(&photo, &probe, settings)
+            .err()
+            .expect("bad settings are refused")
+            .to_string()
+    };
+    let err = refused(&Settings {
+        env_size: (100, 30),
+        ..settings.clone()
+    });
+    assert!(err.contains("100x30 is not a 2:1 map"), "{err}");
+    for rows in [0, 182] {
+        let err = refused(&Settings {
+            working_height: Some(rows),
+            ..settings.clone()
+        });
+        assert!(
+            err.contains(&format!("{rows} rows")) && err.contains("1 to 181"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
 fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
     let (probe, truth, photo, mut settings) = scene();
     settings.known_pose = Some(truth);

@@ -225,7 +225,8 @@ pub struct Settings {
     /// keeps 64 and 16, the final phase's time and memory growing with
     /// its samples.
     pub spp_final: u32,
-    /// Working env map height (None: from the probe's roughness).
+    /// Working env map height (None: from the probe's roughness), at
+    /// most 181 rows (a map of at most [`lighting::MAX_TEXELS`] texels).
     pub working_height: Option<usize>,
     /// Weight of the quadratic smoothness (scale-free) of the pilot's and
     /// the leans' maps. Less lets the lights be sharper (shiny and diffuse
@@ -2046,6 +2047,15 @@ pub fn estimate_with_progress(
     let reference = ReferenceMask::new(&photo.mask)?;
     let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
     let work_h = settings.working_height.unwrap_or_else(|| working_height(min_roughness));
+    if work_h == 0 || 2 * work_h * work_h > lighting::MAX_TEXELS {
+        return Err(RenderError::value(
+            "working height",
+            format!(
+                "{work_h} rows: a working map has 1 to {} rows",
+                (lighting::MAX_TEXELS as f64 / 2.0).sqrt() as usize
+            ),
+        ));
+    }
     let work = (2 * work_h, work_h);
     let mut phases = PhaseLog {
         phases: Vec::new(),
