@@ -221,9 +221,10 @@ pub struct Settings {
     /// 9.7/1.1/1.3 at 128, 7.4/0.8/0.6 at 256. With the pilot, at the true
     /// pose of the suite's 18 Mitsuba twins (smoothness 3e-4): 4.30 / 0.78
     /// / 0.55 deg mirror / shiny / diffuse at 64 (pilot 16), 4.20 / 0.77 /
-    /// 0.52 at 96, 4.27 / 0.79 / 0.55 with a pilot of 32: the default
-    /// keeps 64 and 16, the final phase's time and memory growing with
-    /// its samples.
+    /// 0.52 at 96, 4.27 / 0.79 / 0.55 with a pilot of 32. With today's
+    /// prior (`alp eval --spp 256`): 3.92 / 0.73 / 0.48 at 64, 3.79 / 0.72
+    /// / 0.45 at 128 (mean run 2.8 -> 5.0 s with the 8-byte transport;
+    /// 3.65 / 0.70 / 0.47 at 256, 11.1 s before it): default 128, best 256.
     pub spp_final: u32,
     /// Working env map height (None: from the probe's roughness), at
     /// most 181 rows (a map of at most [`lighting::MAX_TEXELS`] texels).
@@ -313,8 +314,8 @@ impl Settings {
         };
         let (spp_pilot, spp_lean, spp_final, lean_step_deg) = match quality {
             Quality::Fast => (8, 8, 8, 0.0),
-            Quality::Default => (16, 16, 64, 0.3),
-            Quality::Best => (32, 32, 128, 0.3),
+            Quality::Default => (16, 16, 128, 0.3),
+            Quality::Best => (32, 32, 256, 0.3),
         };
         let final_smoothness = match quality {
             Quality::Fast => Smoothness::quadratic(3e-4),
