@@ -2180,7 +2180,10 @@ pub fn estimate_with_progress(
                     None,
                     SOLVE_ITERS,
                 )?;
-                phases.push(lighting_report("lighting_pilot", &fit, t1));
+                phases.push(PhaseReport {
+                    pose: Some(PoseRecord::from(pose)),
+                    ..lighting_report("lighting_pilot", &fit, t1)
+                });
                 Ok(fit.into_map())
             };
             let (mut pose, mut map) = (pose, pilot_at(&pose, &mut phases)?);
