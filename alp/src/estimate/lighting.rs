@@ -15,25 +15,22 @@ use serde::Serialize;
 /// Eight bytes where a u32 texel and f32 weights took sixteen: a solve
 /// streams the whole transport at each of its hundreds of evaluations, and
 /// a 64-spp transport (3M entries on a 13k-pixel can) then fits in the
-/// machine's last-level cache. With the lanes below, the known-pose
+/// machine's last-level cache. With two running sums per row, the known-pose
 /// lighting phases of `cargo bench --bench lighting_solve` (2 threads) took
 /// 1.80 s instead of 2.77 at 32 spp and 5.05 instead of 8.10 at 128, at
-/// the same PSNR.
+/// the same PSNR (texels then padded to four f64 lanes, which the compiler
+/// did not use: unpadded, 1.86 and 5.31 s against 1.94 and 4.96 measured
+/// alongside, the same results).
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     index: u16,
     weight: [u16; 3],
 }
 
-/// An env map's texel, or a sum over texels, with RGB padded to four
-/// lanes: a product with an entry's weight is one vector multiply-add
-/// (four f64 lanes of AVX2) instead of three gathered scalars.
-type Lanes = [f64; 4];
-
 impl Entry {
-    /// The weight in quanta, as lanes (the fourth 0).
-    fn lanes(&self) -> Lanes {
-        [self.weight[0] as f64, self.weight[1] as f64, self.weight[2] as f64, 0.0]
+    /// The weight in quanta.
+    fn quanta(&self) -> [f64; 3] {
+        self.weight.map(|q| q as f64)
     }
 }
 
@@ -209,24 +206,24 @@ impl Transport {
         &self.rows[self.row_start[p]..self.row_start[p + 1]]
     }
 
-    /// Pixel `p`'s radiance under `env` (lanes per texel). Two sums, of
+    /// Pixel `p`'s radiance under `env` (RGB per texel). Two sums, of
     /// the even and the odd entries: one would chain every multiply-add
     /// of the row on the one before.
-    fn render_pixel(&self, p: usize, env: &[Lanes]) -> [f64; 3] {
-        let (mut even, mut odd) = ([0.0; 4], [0.0; 4]);
+    fn render_pixel(&self, p: usize, env: &[[f64; 3]]) -> [f64; 3] {
+        let (mut even, mut odd) = ([0.0; 3], [0.0; 3]);
         let mut pairs = self.row(p).chunks_exact(2);
         for pair in &mut pairs {
             let (a, b) = (&pair[0], &pair[1]);
-            let (wa, ta) = (a.lanes(), env[a.index as usize]);
-            let (wb, tb) = (b.lanes(), env[b.index as usize]);
-            (0..4).for_each(|c| {
+            let (wa, ta) = (a.quanta(), env[a.index as usize]);
+            let (wb, tb) = (b.quanta(), env[b.index as usize]);
+            (0..3).for_each(|c| {
                 even[c] += wa[c] * ta[c];
                 odd[c] += wb[c] * tb[c];
             });
         }
         for e in pairs.remainder() {
-            let (w, t) = (e.lanes(), env[e.index as usize]);
-            (0..4).for_each(|c| even[c] += w[c] * t[c]);
+            let (w, t) = (e.quanta(), env[e.index as usize]);
+            (0..3).for_each(|c| even[c] += w[c] * t[c]);
         }
         let quantum = self.quantum[p] as f64;
         std::array::from_fn(|c| (even[c] + odd[c]) * quantum)
@@ -234,10 +231,10 @@ impl Transport {
 
     /// The pixels' radiance under `env` (texel-major RGB).
     pub fn apply(&self, env: &[f64], out: &mut [[f64; 3]]) {
-        let env = lanes(env);
+        let (env, _) = env.as_chunks::<3>();
         out.par_iter_mut()
             .enumerate()
-            .for_each(|(p, px)| *px = self.render_pixel(p, &env));
+            .for_each(|(p, px)| *px = self.render_pixel(p, env));
     }
 
     /// `rendered = A env` and `grad += A^T r`, where `r_p =
@@ -245,7 +242,7 @@ impl Transport {
     /// least-squares gradient): one pass over the rows instead of two, each
     /// row still in cache when its residual goes back. The solve's every
     /// iteration needs both, and they are bound by memory traffic: on a
-    /// 43k-pixel cap at 128 spp (6.7M entries) the solves and transport
+    /// 43k-pixel cap at 128 spp (6.7M entries of 16 bytes) the solves and transport
     /// builds took 4.5 s of the final phase's 6.5 s with a pass each (the
     /// finest level's 111 evaluations 2.2 s with one). The transposed
     /// products sum per chunk of [`PIXEL_CHUNK`] pixels into `scratch`
@@ -257,25 +254,24 @@ impl Transport {
         residual: impl Fn(usize, [f64; 3]) -> [f64; 3] + Sync,
         rendered: &mut [[f64; 3]],
         grad: &mut [f64],
-        scratch: &mut Vec<Lanes>,
+        scratch: &mut Vec<[f64; 3]>,
     ) {
-        let env = lanes(env);
+        let (env, _) = env.as_chunks::<3>();
         let texels = self.width * self.height;
         scratch.clear();
-        scratch.resize(self.pixels.div_ceil(PIXEL_CHUNK) * texels, [0.0; 4]);
+        scratch.resize(self.pixels.div_ceil(PIXEL_CHUNK) * texels, [0.0; 3]);
         scratch
             .par_chunks_mut(texels)
             .zip(rendered.par_chunks_mut(PIXEL_CHUNK))
             .enumerate()
             .for_each(|(chunk, (sums, rendered))| {
                 for (p, px) in pixel_chunk(chunk, self.pixels).zip(rendered) {
-                    *px = self.render_pixel(p, &env);
+                    *px = self.render_pixel(p, env);
                     let quantum = self.quantum[p] as f64;
-                    let r = residual(p, *px);
-                    let r = [r[0] * quantum, r[1] * quantum, r[2] * quantum, 0.0];
+                    let r = residual(p, *px).map(|r| r * quantum);
                     for e in self.row(p) {
-                        let (w, sum) = (e.lanes(), &mut sums[e.index as usize]);
-                        (0..4).for_each(|c| sum[c] += w[c] * r[c]);
+                        let (w, sum) = (e.quanta(), &mut sums[e.index as usize]);
+                        (0..3).for_each(|c| sum[c] += w[c] * r[c]);
                     }
                 }
             });
@@ -287,7 +283,7 @@ impl Transport {
     /// radiance units.
     fn texel_sums(&self, term: impl Fn(usize, [f64; 3]) -> [f64; 3] + Sync) -> Vec<f64> {
         let texels = self.width * self.height;
-        let mut partial = vec![[0.0; 4]; self.pixels.div_ceil(PIXEL_CHUNK) * texels];
+        let mut partial = vec![[0.0; 3]; self.pixels.div_ceil(PIXEL_CHUNK) * texels];
         partial.par_chunks_mut(texels).enumerate().for_each(|(chunk, sums)| {
             for p in pixel_chunk(chunk, self.pixels) {
                 let quantum = self.quantum[p] as f64;
@@ -323,16 +319,11 @@ impl Transport {
     }
 }
 
-/// A texel-major RGB map as lanes.
-fn lanes(env: &[f64]) -> Vec<Lanes> {
-    env.chunks_exact(3).map(|t| [t[0], t[1], t[2], 0.0]).collect()
-}
-
-/// Adds the chunks' partial sums (`texels` lanes each, in chunk order) to
-/// the texel-major RGB `total`.
-fn add_chunk_sums(partial: &[Lanes], texels: usize, total: &mut [f64]) {
+/// Adds the chunks' partial sums (`texels` each, in chunk order) to the
+/// texel-major RGB `total`.
+fn add_chunk_sums(partial: &[[f64; 3]], texels: usize, total: &mut [f64]) {
     for sums in partial.chunks_exact(texels) {
-        for (t, s) in total.chunks_exact_mut(3).zip(sums) {
+        for (t, s) in total.as_chunks_mut::<3>().0.iter_mut().zip(sums) {
             (0..3).for_each(|c| t[c] += s[c]);
         }
     }
