@@ -9,7 +9,7 @@ use render::envmap::EnvMap;
 use render::image_io::Mask;
 use render::integrator::{RenderSettings, render_image};
 use render::pose::Pose;
-use render::procedural::{SodaCan, ThermosCap};
+use render::procedural::{SodaCan, ThermosCap, UvSphere};
 
 /// A 160x120 photo (16 spp) of `probe` at `truth` from `eye`, looking at
 /// `target`, under the bundled courtyard map.
@@ -69,6 +69,8 @@ fn finds_the_probe_and_explains_the_photo() {
     assert!(err < 0.012, "probe centre off by {err} m");
     let axis = (result.pose.rotation * Vec3::Y).dot(truth.rotation * Vec3::Y);
     assert!(axis > 0.99, "probe axis off by {} degrees", axis.acos().to_degrees());
+    // Its size is known: the outline fits' drift in scale went into depth.
+    assert_eq!(result.pose.scale, 1.0);
     assert!(
         result.report.psnr_db > 18.0,
         "re-render PSNR {} dB",
@@ -233,6 +235,27 @@ fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
     );
     assert_eq!(result.report.chosen_start, None);
     assert!(result.report.lean.is_none(), "a known pose is not leaned");
+    let psnr = result.report.psnr_db;
+    assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");
+}
+
+#[test]
+fn a_sharp_probe_s_map_is_solved_finer_than_its_pose_searches_maps() {
+    let probe = UvSphere {
+        radius: 0.03,
+        roughness: 0.1,
+        ..UvSphere::default()
+    }
+    .build();
+    let truth = Pose::new(Quat::IDENTITY, 1.0, Vec3::new(0.0, 0.06, 0.0));
+    let photo = photo_of(&probe, &truth, Vec3::new(0.0, 0.12, 0.3), Vec3::new(0.0, 0.06, 0.0));
+    let mut settings = Settings::new(Quality::Default);
+    settings.known_pose = Some(truth);
+    settings.spp_final = 16;
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    // The final solve starts from the pilot map, solved at the searches' resolution.
+    assert_eq!(result.report.working_resolution, (256, 128));
+    assert_eq!(result.report.search_resolution, (128, 64));
     let psnr = result.report.psnr_db;
     assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");
 }

@@ -392,6 +392,18 @@ pub fn rescaled(pose: &Pose, mesh: &Mesh, factor: f32) -> Pose {
     centred(pose, mesh, pose.rotation, pose.scale * factor)
 }
 
+/// The pose at the probe's own size (scale 1: the asset is in metres) that
+/// the camera sees as it sees `pose`: `pose` scaled by `1 / scale` about
+/// the camera's centre, which moves no ray, and no normal either. Scale and
+/// distance are one unknown to a pinhole camera under distant light (an
+/// outline fit's scale drifts freely along it); the known size pins it.
+pub fn at_own_size(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Pose {
+    let (lo, hi) = mesh.bounds();
+    let centre = pose.transform_point(0.5 * (lo + hi));
+    let centre = camera.origin + (centre - camera.origin) / pose.scale;
+    Pose::new(pose.rotation, 1.0, centre - pose.rotation * (0.5 * (lo + hi)))
+}
+
 /// The pose of `rotation` and `scale` that keeps the centre of the
 /// probe's bounding box where `pose` has it.
 fn centred(pose: &Pose, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
@@ -663,6 +675,27 @@ mod tests {
         assert!((turned.rotation * Vec3::Y - pose.rotation * Vec3::Y).length() < 1e-5);
         let side = (turned.rotation * Vec3::X).dot(pose.rotation * Vec3::Z);
         assert!((side.abs() - 1.0).abs() < 1e-5, "a quarter turn: {side}");
+    }
+
+    #[test]
+    fn at_its_own_size_the_probe_looks_the_same() {
+        let probe = SodaCan::default().build();
+        let camera = camera(0.06, 0.06);
+        let pose = Pose::new(Quat::from_rotation_x(0.5), 0.85, Vec3::new(0.01, 0.02, 0.03));
+        let own = at_own_size(&pose, &probe.mesh, &camera);
+        assert_eq!((own.scale, own.rotation), (1.0, pose.rotation));
+        let further = (own.translation - camera.origin).length() / (pose.translation - camera.origin).length();
+        assert!(further > 1.1, "the larger probe is further away: {further}");
+        for &p in &probe.mesh.positions {
+            let (seen, seen_own) = (
+                camera.project(pose.transform_point(p)),
+                camera.project(own.transform_point(p)),
+            );
+            let moved = (seen.unwrap() - seen_own.unwrap()).length();
+            assert!(moved < 1e-3, "vertex {p} moved {moved} px");
+        }
+        let same = at_own_size(&own, &probe.mesh, &camera);
+        assert!((same.translation - own.translation).length() < 1e-6);
     }
 
     #[test]

@@ -660,8 +660,12 @@ pub struct Report {
     /// of the ends, its first candidate is the kept end's score there
     /// (phase `lighting_end`).
     pub lean: Option<LineSearchReport>,
-    /// Working env map resolution (width, height) and why.
+    /// Working env map resolution (width, height) of the output map's
+    /// solve, set by `min_roughness`.
     pub working_resolution: (usize, usize),
+    /// The pose searches' map resolution: the working one, at most
+    /// [`SEARCH_HEIGHT`] rows.
+    pub search_resolution: (usize, usize),
     /// The smallest roughness of the probe, which set it.
     pub min_roughness: f32,
     /// The probe's axis, mesh coordinates: what the search turns the probe
@@ -790,15 +794,30 @@ const COARSEST_HEIGHT: usize = 8;
 
 /// Working env map height for a smallest roughness `r`: texels about half
 /// the narrowest reflected lobe (the half-vector spread alpha = r^2 radians
-/// doubles on reflection: texels alpha wide), as a power of two in 16..=64.
-/// At the true pose of six scenes (can, r = 0.2: 64 rows rather than 32;
-/// final solve at 64 spp), 7.51 / 1.39 / 0.87 deg mirror / shiny / diffuse
-/// against 7.64 / 1.74 / 1.14.
+/// doubles on reflection: texels alpha wide), as a power of two in
+/// 16..=128 (a can, r = 0.2, gets 64 rows; a probe sharper than r = 0.186,
+/// 128). At the true pose of six scenes (can, r = 0.2: 64 rows rather than
+/// 32; final solve at 64 spp), 7.51 / 1.39 / 0.87 deg mirror / shiny /
+/// diffuse against 7.64 / 1.74 / 1.14. Sharp probes' Mitsuba twins at the
+/// true pose (default quality: pilot at [`SEARCH_HEIGHT`] rows), 128 rows
+/// against 64: chrome balls (3 scenes each) of r = 0.05 1.09 / 0.30 / 0.13
+/// against 1.56 / 0.40 / 0.26, r = 0.1 1.53 / 0.32 / 0.13 against 1.81 /
+/// 0.34 / 0.23, r = 0.15 1.84 / 0.32 / 0.04 against 2.04 / 0.29 / 0.08;
+/// the can with half its roughness (6 scenes) 2.80 / 0.87 / 0.38 against
+/// 2.99 / 0.97 / 0.39.
 pub fn working_height(min_roughness: f32) -> usize {
     let alpha = (min_roughness * min_roughness).max(0.02);
     let rows = std::f32::consts::PI / alpha;
-    (1usize << rows.log2().round().clamp(4.0, 6.0) as u32).clamp(16, 64)
+    1usize << rows.log2().round().clamp(4.0, 7.0) as u32
 }
+
+/// The pose searches' map height at most (pilot, ends, size and lean):
+/// they compare poses and start the output's solve, which refines what
+/// they resolve. On the r = 0.1 chrome balls, with the pose estimated,
+/// their maps at 64 rows rather than 128 gave the same errors (1.55 /
+/// 0.33 / 0.13 deg against 1.55 / 0.32 / 0.12), the pilot's solve taking
+/// 0.15 to 0.19 s rather than 0.64 to 0.71.
+pub const SEARCH_HEIGHT: usize = 64;
 
 /// Light samples of the final lighting solve at most: its memory (the
 /// samples, then the transport) and time grow with them. The suite's
@@ -1436,11 +1455,21 @@ fn fit_silhouette(
     };
     let iters = iters.max(1);
     let depth = (start.translation - ctx.photo.camera.origin).length();
-    fit_pose(name, start, iters, depth, |tape, pose_vars, eval| {
+    let (pose, loss, report) = fit_pose(name, start, iters, depth, |tape, pose_vars, eval| {
         let t = (eval as f64 / iters as f64).min(1.0);
         let at = progress.start + t * (progress.end - progress.start);
         ctx.evaluate(tape, pose_vars, None, at, seed.wrapping_add(eval as u64))
-    })
+    })?;
+    let camera = &ctx.photo.camera;
+    let pose = init::at_own_size(&pose, &ctx.probe.asset.mesh, camera);
+    Ok((
+        pose,
+        loss,
+        PhaseReport {
+            pose: Some(PoseRecord::from(&pose)),
+            ..report
+        },
+    ))
 }
 
 /// A short silhouette refit of `start` (a turned or mirrored pose), from
@@ -2144,6 +2173,8 @@ pub fn estimate_with_progress(
         ));
     }
     let work = (2 * work_h, work_h);
+    let search_h = work_h.min(SEARCH_HEIGHT);
+    let search_res = (2 * search_h, search_h);
     let mut phases = PhaseLog {
         phases: Vec::new(),
         expected: settings.phase_count(),
@@ -2152,7 +2183,7 @@ pub fn estimate_with_progress(
     let (pose, rival_end, axes, starts, chosen) = match known_pose {
         Some(pose) => (pose, None, Vec::new(), Vec::new(), None),
         None => {
-            let search = search_pose(&probe, photo, &reference, &clipped, work, settings, &mut phases)?;
+            let search = search_pose(&probe, photo, &reference, &clipped, search_res, settings, &mut phases)?;
             (
                 search.pose,
                 search.rival_end,
@@ -2185,7 +2216,7 @@ pub fn estimate_with_progress(
                     &probe,
                     photo,
                     pose,
-                    work,
+                    search_res,
                     &pilot_settings,
                     &clipped,
                     Smoothness::quadratic(settings.smoothness),
@@ -2216,7 +2247,8 @@ pub fn estimate_with_progress(
                     phases.expect_more(3);
                     let score = |pose: &Pose, map: &[f64], phases: &mut PhaseLog| -> Result<(f64, Vec<f64>)> {
                         let t1 = Instant::now();
-                        let (fit, score) = pose_score(&probe, photo, pose, map, work, &clipped, settings, Pixels::All)?;
+                        let (fit, score) =
+                            pose_score(&probe, photo, pose, map, search_res, &clipped, settings, Pixels::All)?;
                         phases.push(PhaseReport {
                             pose: Some(PoseRecord::from(pose)),
                             ..lighting_report("lighting_end", &fit, t1)
@@ -2262,7 +2294,7 @@ pub fn estimate_with_progress(
                         &probe,
                         photo,
                         &map,
-                        work,
+                        search_res,
                         &clipped,
                         settings,
                         &mut phases,
@@ -2299,8 +2331,9 @@ pub fn estimate_with_progress(
     let t2 = Instant::now();
     let sampler = pilot
         .as_deref()
-        .map(|texels| env_from_texels(texels, work.0, work.1).map(|map| EnvSampler::new(&map)))
+        .map(|texels| env_from_texels(texels, search_res.0, search_res.1).map(|map| EnvSampler::new(&map)))
         .transpose()?;
+    let start = pilot.map(|texels| lighting::resample(&texels, search_res, work));
     let sampling = match &sampler {
         Some(sampler) => LightSampling::mis(sampler),
         None => LightSampling::BSDF,
@@ -2322,7 +2355,7 @@ pub fn estimate_with_progress(
         LightingPurpose::Output,
         Pixels::All,
         &sampling,
-        pilot.as_deref(),
+        start.as_deref(),
         SOLVE_ITERS,
     )?;
     let final_psnr = fit.psnr_db();
@@ -2356,6 +2389,7 @@ pub fn estimate_with_progress(
         size,
         lean,
         working_resolution: work,
+        search_resolution: search_res,
         min_roughness,
         probe_axis: (to_y.inverse() * Vec3::Y).to_array(),
         mask_on_border_pixels: mask_on_border(&full.mask),
@@ -2387,6 +2421,14 @@ pub fn estimate_with_progress(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_working_map_is_as_fine_as_the_sharpest_lobe_resolves() {
+        // A chrome ball, a can's bare metal (r = 0.2), a cap's steel, paint, a rough probe.
+        for (roughness, rows) in [(0.05, 128), (0.15, 128), (0.2, 64), (0.25, 64), (0.35, 32), (0.6, 16)] {
+            assert_eq!(working_height(roughness), rows, "roughness {roughness}");
+        }
+    }
 
     #[test]
     fn a_photo_box_filtered_keeps_every_point_in_its_square() {
