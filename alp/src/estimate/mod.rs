@@ -1585,6 +1585,17 @@ fn env_from_texels(texels: &[f64], width: usize, height: usize) -> Result<EnvMap
     EnvMap::new(width, height, radiance)
 }
 
+/// A working map (texel-major RGB, `work` = width x height) at the output's
+/// size: box-filtered down, which keeps its power (a light finer than the
+/// output's texels keeps its energy, which bilinear taps at the output's
+/// texel centres would miss), or bilinear up.
+fn output_map(texels: &[f64], work: (usize, usize), out: (usize, usize)) -> Result<EnvMap> {
+    match out.1 < work.1 {
+        true => Ok(env_from_texels(texels, work.0, work.1)?.downsample(out.1)),
+        false => env_from_texels(&lighting::resample(texels, work, out), out.0, out.1),
+    }
+}
+
 /// What the pose search found: the pose, every axis hypothesis's and
 /// start's account and the index of the start kept.
 struct PoseSearch {
@@ -1936,7 +1947,7 @@ fn search_pose(
         },
     };
     let depth = (pose.translation - photo.camera.origin).length();
-    // The working-resolution map, from `start` (or from scratch), reported.
+    // The search-resolution map, from `start` (or from scratch), reported.
     let search_lighting = |pose: &Pose, start: Option<&[f64]>, phases: &mut PhaseLog| -> Result<LightingFit> {
         let t1 = Instant::now();
         let fit = fit_lighting(
@@ -2420,9 +2431,9 @@ pub fn estimate_with_progress(
     )?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
-    let env = env_from_texels(&lighting::resample(&fit.env, work, (out_w, out_h)), out_w, out_h)?;
+    let env = output_map(&fit.env, work, (out_w, out_h))?;
     let confidence: Vec<f64> = fit.transport.confidence().iter().flat_map(|&c| [c as f64; 3]).collect();
-    let confidence = env_from_texels(&lighting::resample(&confidence, work, (out_w, out_h)), out_w, out_h)?;
+    let confidence = output_map(&confidence, work, (out_w, out_h))?;
     let rerender = match working {
         None => {
             let channels: [Vec<f64>; 3] = std::array::from_fn(|c| fit.rendered.iter().map(|p| p[c]).collect());
@@ -2514,6 +2525,29 @@ mod tests {
         );
         assert_eq!(rival([10.0, 10.1, 10.6, 11.5]), Some(2), "half a turn away");
         assert_eq!(rival([10.0, 10.1, 11.1, 11.5]), None, "both ranked too far behind");
+    }
+
+    #[test]
+    fn a_small_output_map_keeps_the_power_of_a_light_finer_than_its_texels() {
+        let power = |map: &EnvMap| -> f64 {
+            let w = map.width();
+            (0..map.height())
+                .map(|r| {
+                    let row: f64 = (0..w).map(|c| map.radiance()[r * w + c][0] as f64).sum();
+                    row * map.texel_solid_angle(r) as f64
+                })
+                .sum()
+        };
+        // One bright texel off the centre of its 4x4 block, on a dim map.
+        let (w, h) = (256, 128);
+        let mut texels = vec![0.1; w * h * 3];
+        texels[(41 * w + 100) * 3..(41 * w + 101) * 3].copy_from_slice(&[5e3; 3]);
+        let working = env_from_texels(&texels, w, h).unwrap();
+        let small = output_map(&texels, (w, h), (64, 32)).unwrap();
+        let (before, after) = (power(&working), power(&small));
+        assert!((after / before - 1.0).abs() < 1e-4, "power {before} -> {after}");
+        let large = output_map(&texels, (w, h), (512, 256)).unwrap();
+        assert_eq!((large.width(), large.height()), (512, 256));
     }
 
     #[test]
