@@ -364,8 +364,7 @@ pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Vec<Pose> {
 /// `axis x view`, about which a positive angle leans the axis towards the
 /// view ray (any axis square to the probe's, for an axis along the ray).
 fn lean_frame(pose: &Pose, mesh: &Mesh, camera: &Camera) -> (Vec3, Vec3, Vec3) {
-    let (lo, hi) = mesh.bounds();
-    let view = (pose.transform_point(0.5 * (lo + hi)) - camera.origin).normalize();
+    let view = (box_centre(pose, mesh) - camera.origin).normalize();
     let axis = (pose.rotation * Vec3::Y).normalize();
     (axis, view, axis.cross(view).normalize_or(axis.any_orthonormal_vector()))
 }
@@ -398,17 +397,26 @@ pub fn rescaled(pose: &Pose, mesh: &Mesh, factor: f32) -> Pose {
 /// distance are one unknown to a pinhole camera under distant light (an
 /// outline fit's scale drifts freely along it); the known size pins it.
 pub fn at_own_size(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Pose {
-    let (lo, hi) = mesh.bounds();
-    let centre = pose.transform_point(0.5 * (lo + hi));
-    let centre = camera.origin + (centre - camera.origin) / pose.scale;
-    Pose::new(pose.rotation, 1.0, centre - pose.rotation * (0.5 * (lo + hi)))
+    let centre = camera.origin + (box_centre(pose, mesh) - camera.origin) / pose.scale;
+    placed(centre, mesh, pose.rotation, 1.0)
 }
 
 /// The pose of `rotation` and `scale` that keeps the centre of the
 /// probe's bounding box where `pose` has it.
 fn centred(pose: &Pose, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
+    placed(box_centre(pose, mesh), mesh, rotation, scale)
+}
+
+/// Where `pose` puts the centre of the probe's bounding box.
+fn box_centre(pose: &Pose, mesh: &Mesh) -> Vec3 {
     let (lo, hi) = mesh.bounds();
-    let centre = pose.transform_point(0.5 * (lo + hi));
+    pose.transform_point(0.5 * (lo + hi))
+}
+
+/// The pose of `rotation` and `scale` that puts the centre of the probe's
+/// bounding box at `centre`.
+fn placed(centre: Vec3, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
+    let (lo, hi) = mesh.bounds();
     Pose::new(rotation, scale, centre - rotation * (scale * 0.5 * (lo + hi)))
 }
 
