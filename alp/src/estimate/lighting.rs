@@ -350,8 +350,10 @@ pub fn pyramid(size: (usize, usize), coarsest: usize) -> Vec<(usize, usize)> {
     heights.into_iter().map(|h| (2 * h, h)).collect()
 }
 
-/// Bilinear resampling of a texel-major RGB map from size `from` to `to`
-/// (FORMATS.md lookups: texel centres at +0.5, wrap in u, clamp in v).
+/// Bilinear resampling of a texel-major RGB map from size `from` up to `to`
+/// (FORMATS.md lookups: texel centres at +0.5, wrap in u, clamp in v). Not
+/// for going down: its taps would miss most texels of a block, and a light
+/// among them (`EnvMap::downsample` keeps the power).
 pub fn resample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec<f64> {
     if from == to {
         return texels.to_vec();
