@@ -5,6 +5,9 @@ texture) and its inter-reflections (up to `--max-depth` bounces). The BRDF is ou
 `principled` with metallic = 1 is GGX (alpha = r^2, visible-normal sampling, separable Smith G)
 with Schlick's Fresnel on F0 = the albedo texture.
 
+A scene's `probe.txt` may name a procedural probe (made with `alp probe make`) or a probe folder,
+relative to the scene folder (FORMATS.md); the twin's `probe.txt` then reaches the same folder.
+
 `tools/eval_suite.py --work DIR` reuses scenes whose `scene.json` matches: put the twins in
 `DIR/scenes` and it evaluates `alp estimate` on them unchanged. Usage:
 
@@ -117,16 +120,22 @@ def main():
         src, dst = os.path.join(args.scenes, name), os.path.join(args.out, name)
         meta = am.read_json(os.path.join(src, "scene.json"))
         kind = open(os.path.join(src, "probe.txt")).read().strip()
-        if kind not in probes:
-            folder = os.path.join(args.out, ".probes", kind)
+        # probe.txt names a procedural probe, or a probe folder relative to
+        # its scene folder (FORMATS.md): a folder is read where it is, and
+        # the twin's probe.txt is rewritten to reach it from the twin's folder.
+        given = os.path.normpath(os.path.join(src, kind))
+        is_folder = os.path.isfile(os.path.join(given, "probe.json"))
+        key = given if is_folder else kind
+        if key not in probes:
+            folder = given if is_folder else os.path.join(args.out, ".probes", kind)
             if not os.path.isfile(os.path.join(folder, "probe.json")):
                 subprocess.run([args.alp, "probe", "make", kind, "--out", folder], check=True)
-            probes[kind] = am.load_probe(folder)
+            probes[key] = am.load_probe(folder)
         t0 = time.time()
         cam = am.load_camera(os.path.join(src, "camera.json"))
         pose = am.load_pose(os.path.join(src, "pose.json"))
         env = am.read_exr(os.path.join(src, "gt_env.exr"))
-        image, alpha = render(mi, probes[kind], pose, cam, env, args.spp, args.max_depth, meta["seed"],
+        image, alpha = render(mi, probes[key], pose, cam, env, args.spp, args.max_depth, meta["seed"],
                               rfilter=args.rfilter)
         if args.background == "env":
             image = image + (1.0 - alpha[..., None]) * env_background(cam, env)
@@ -136,6 +145,9 @@ def main():
         os.makedirs(tmp)
         for f in FILES_KEPT:
             shutil.copy(os.path.join(src, f), tmp)
+        if is_folder:
+            with open(os.path.join(tmp, "probe.txt"), "w") as f:
+                f.write(os.path.relpath(given, dst) + "\n")
         am.write_exr(os.path.join(tmp, "image.exr"), image)
         meta.update({"renderer": "mitsuba path, max_depth %d, %s filter, %s background"
                                  % (args.max_depth, args.rfilter, args.background),
