@@ -229,8 +229,8 @@ pub struct Settings {
     /// 9.7/1.1/1.3 at 128, 7.4/0.8/0.6 at 256. With the pilot, at the true
     /// pose of the suite's 18 Mitsuba twins (smoothness 3e-4): 4.30 / 0.78
     /// / 0.55 deg mirror / shiny / diffuse at 64 (pilot 16), 4.20 / 0.77 /
-    /// 0.52 at 96, 4.27 / 0.79 / 0.55 with a pilot of 32. With today's
-    /// prior (`alp eval --spp 256`): 3.92 / 0.73 / 0.48 at 64, 3.79 / 0.72
+    /// 0.52 at 96, 4.27 / 0.79 / 0.55 with a pilot of 32. With the edged
+    /// final smoothness (`alp eval --spp 256`): 3.92 / 0.73 / 0.48 at 64, 3.79 / 0.72
     /// / 0.45 at 128 (mean run 2.8 -> 5.0 s with the 8-byte transport;
     /// 3.65 / 0.70 / 0.47 at 256, 11.1 s before it): default 128, best 256.
     pub spp_final: u32,
@@ -1652,13 +1652,21 @@ fn rival_start(starts: &[StartReport], candidates: &[Pose], chosen: usize) -> Op
         (candidates[k].rotation * Vec3::Y).dot(axis) < 0.0
             || (starts[k].axis == starts[chosen].axis && turn.abs() > 90.0)
     };
-    (0..starts.len())
-        .filter(|&k| elsewhere(k))
-        .reduce(|best, k| match ranks_above(&starts[k], &starts[best]) {
-            true => k,
-            false => best,
-        })
+    best_ranked(starts, (0..starts.len()).filter(|&k| elsewhere(k)), false)
         .filter(|&k| starts[k].rgb_angle_deg - starts[chosen].rgb_angle_deg <= RIVAL_RANK_DEG)
+}
+
+/// The best-ranked of the starts `among` (the first of equals), by colour
+/// ([`ranks_above`]), or for a probe `symmetric` about its axis, which has
+/// no pattern to rank, by silhouette loss.
+fn best_ranked(starts: &[StartReport], among: impl IntoIterator<Item = usize>, symmetric: bool) -> Option<usize> {
+    among.into_iter().reduce(|best, k| {
+        let above = match symmetric {
+            true => starts[k].silhouette_loss < starts[best].silhouette_loss,
+            false => ranks_above(&starts[k], &starts[best]),
+        };
+        if above { k } else { best }
+    })
 }
 
 /// Axis hypotheses whose silhouette loss is within this factor of the best
@@ -1885,24 +1893,6 @@ fn search_pose(
         &mut starts,
         &mut candidates,
     )?;
-    // Colour ranks the starts of a probe with a pattern. A probe symmetric
-    // about its axis shows none: a coarse map explains it about as well
-    // either end up (a lying cap of one colour: 7.76 deg upside down, 7.82
-    // the right way up), and the starts go by their outlines (at default
-    // quality the least silhouette loss was within 1 deg of the true axis
-    // on all 9 cap scenes of the suite). Their margin between a cap's ends can be small: on
-    // the lying courtyard cap the two ends' silhouette losses are 1.6 %
-    // apart (38 % under SoftRas, whose limb bias made much of it), and the
-    // suite's default run took the right end, its fast run the wrong one.
-    let best_of = |starts: &[StartReport]| {
-        (1..starts.len()).fold(0, |best, k| {
-            let above = match symmetric {
-                true => starts[k].silhouette_loss < starts[best].silhouette_loss,
-                false => ranks_above(&starts[k], &starts[best]),
-            };
-            if above { k } else { best }
-        })
-    };
     // A start's yaw refined by halving steps about it (the starts are a
     // coarse grid; the image loss alone pulls a turn in only slowly).
     let first_step = match symmetric {
@@ -1920,22 +1910,30 @@ fn search_pose(
                 .collect();
             let tried = starts.len();
             record(ranked, phases, starts, candidates)?;
-            best = (tried..starts.len()).fold(best, |best, k| match ranks_above(&starts[k], &starts[best]) {
-                true => k,
-                false => best,
-            });
+            best = best_ranked(starts, std::iter::once(best).chain(tried..starts.len()), symmetric).unwrap_or(best);
             step *= 0.5;
         }
         Ok(best)
     };
-    let chosen = refine(best_of(&starts), &mut starts, &mut candidates)?;
+    // Colour ranks the starts of a probe with a pattern. A probe symmetric
+    // about its axis shows none: a coarse map explains it about as well
+    // either end up (a lying cap of one colour: 7.76 deg upside down, 7.82
+    // the right way up), and the starts go by their outlines (at default
+    // quality the least silhouette loss was within 1 deg of the true axis
+    // on all 9 cap scenes of the suite). Their margin between a cap's ends can be small: on
+    // the lying courtyard cap the two ends' silhouette losses are 1.6 %
+    // apart (38 % under SoftRas, whose limb bias made much of it), and the
+    // suite's default run took the right end, its fast run the wrong one.
+    let best = best_ranked(&starts, 0..starts.len(), symmetric).expect("at least one start");
+    let chosen = refine(best, &mut starts, &mut candidates)?;
     let mut pose = candidates[chosen];
     let axis = pose.rotation * Vec3::Y;
-    let within = RIVAL_END_RATIO * starts[chosen].silhouette_loss;
     let rival = match symmetric {
         true => axis_poses
             .iter()
-            .filter(|(p, loss)| (p.rotation * Vec3::Y).dot(axis) < 0.0 && *loss <= within)
+            .filter(|(p, loss)| {
+                (p.rotation * Vec3::Y).dot(axis) < 0.0 && *loss <= RIVAL_END_RATIO * starts[chosen].silhouette_loss
+            })
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(p, _)| *p),
         false => match rival_start(&starts, &candidates, chosen) {
