@@ -377,6 +377,20 @@ pub fn leaned(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
     rotated(pose, mesh, Quat::from_axis_angle(tip, deg.to_radians()) * pose.rotation)
 }
 
+/// `fitted`'s axis, place (the centre of its bounding box) and scale with
+/// `pose`'s turn about the axis: `pose` turned by the shortest arc that
+/// takes its axis on to `fitted`'s.
+pub fn on_axis_of(pose: &Pose, fitted: &Pose, mesh: &Mesh) -> Pose {
+    let axis = |p: &Pose| (p.rotation * Vec3::Y).normalize();
+    let arc = Quat::from_rotation_arc(axis(pose), axis(fitted));
+    placed(
+        box_centre(fitted, mesh),
+        mesh,
+        (arc * pose.rotation).normalize(),
+        fitted.scale,
+    )
+}
+
 /// `pose` with the orientation `rotation`, the centre of the probe's
 /// bounding box kept in place.
 fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
@@ -704,6 +718,30 @@ mod tests {
         }
         let same = at_own_size(&own, &probe.mesh, &camera);
         assert!((same.translation - own.translation).length() < 1e-6);
+    }
+
+    #[test]
+    fn on_a_fitted_axis_a_pose_keeps_its_turn() {
+        let probe = SodaCan::default().build();
+        let pose = Pose::new(Quat::from_rotation_x(0.5), 1.0, Vec3::new(0.01, 0.02, 0.03));
+        // A fit that tipped the axis by 1 deg, moved the probe and turned it 20 deg about the axis.
+        let tip = Quat::from_axis_angle(Vec3::new(0.6, 0.0, 0.8), 1f32.to_radians());
+        let fitted = turned(
+            &Pose::new(tip * pose.rotation, 1.0, pose.translation + Vec3::new(0.001, 0.0, 0.0)),
+            &probe.mesh,
+            20.0,
+        );
+        let kept = on_axis_of(&pose, &fitted, &probe.mesh);
+        let axis = |p: &Pose| p.rotation * Vec3::Y;
+        assert!(axis(&kept).angle_between(axis(&fitted)) < 1e-3, "on the fitted axis");
+        let centre = |p: &Pose| box_centre(p, &probe.mesh);
+        assert!((centre(&kept) - centre(&fitted)).length() < 1e-6, "at the fitted place");
+        // From the pose to the kept one, a tip of the axis alone: no turn about it.
+        let (about, angle) = (kept.rotation * pose.rotation.inverse()).to_axis_angle();
+        let tipped = axis(&pose).angle_between(axis(&fitted));
+        assert!(tipped > 0.5f32.to_radians(), "the fit tipped the axis");
+        assert!((angle - tipped).abs() < 1e-5, "turned {angle} rad, tipped {tipped}");
+        assert!(about.dot(axis(&pose)).abs() < 1e-3, "turned about the axis: {about}");
     }
 
     #[test]

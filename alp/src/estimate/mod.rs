@@ -73,6 +73,7 @@ use std::time::Instant;
 
 use autodiff::Tape;
 use glam::{Quat, Vec2, Vec3};
+use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
 use rayon::prelude::*;
 use render::bsdf::GgxMetal;
@@ -1309,13 +1310,31 @@ impl LitShares {
 /// above which they lie on an edge of the probe's reflectance.
 const EDGE_CONTRAST: f64 = 0.15;
 
+/// How a pose phase's Adam steps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PoseSteps {
+    /// Its full step throughout: a fit from a start.
+    Full,
+    /// A quarter of it, annealed (cosine) to a twentieth of that: the
+    /// polish of a fit. A constant-step Adam ends wandering about the
+    /// optimum by about its step, and along directions the outline
+    /// tells weakly it has not yet arrived (see [`polish_silhouette`]).
+    Polish,
+}
+
 /// Adam over the 8 pose parameters: per parameter kind its own step size
 /// (rotation quaternion, translation in metres scaled by the depth, log scale).
-fn pose_adam(iters: usize, depth: f32) -> Result<Adam> {
+fn pose_adam(iters: usize, depth: f32, steps: PoseSteps) -> Result<Adam> {
+    let (factor, last) = match steps {
+        PoseSteps::Full => (1.0, 1.0),
+        PoseSteps::Polish => (0.25, 0.05),
+    };
+    let anneal = Cosine::new(iters.max(1), last).map_err(|e| RenderError::value("pose optimiser", e.to_string()))?;
+    let group = |range, step: f64| ParamGroup::new(range, factor * step).schedule(anneal);
     Adam::builder(POSE_PARAMS)
-        .group(ParamGroup::new(0..4, 0.02))
-        .group(ParamGroup::new(4..7, 0.004 * depth as f64))
-        .group(ParamGroup::new(7..8, 0.005))
+        .group(group(0..4, 0.02))
+        .group(group(4..7, 0.004 * depth as f64))
+        .group(group(7..8, 0.005))
         .max_iters(iters)
         .build()
         .map_err(|e| RenderError::value("pose optimiser", e.to_string()))
@@ -1386,12 +1405,19 @@ const GRADIENT_NORM_EVERY: usize = 10;
 /// reports every term's value (and, every [`GRADIENT_NORM_EVERY`]
 /// evaluations and at the last, its gradient norm). A failed evaluation
 /// (the probe left the view) ends the phase with its error.
-fn fit_pose<R>(name: &str, start: Pose, iters: usize, depth: f32, mut record: R) -> Result<(Pose, f64, PhaseReport)>
+fn fit_pose<R>(
+    name: &str,
+    start: Pose,
+    iters: usize,
+    depth: f32,
+    steps: PoseSteps,
+    mut record: R,
+) -> Result<(Pose, f64, PhaseReport)>
 where
     R: for<'t> FnMut(&'t Tape<f64>, &PoseVars<'t, f64>, usize) -> Result<Evaluation<'t>>,
 {
     let t0 = Instant::now();
-    let mut adam = pose_adam(iters, depth)?;
+    let mut adam = pose_adam(iters, depth, steps)?;
     let (mut evals, mut failure, mut per_iteration) = (0usize, None, Vec::with_capacity(iters + 1));
     let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
         let tape = Tape::<f64>::new();
@@ -1455,7 +1481,7 @@ fn fit_silhouette(
     ctx: &PoseContext,
     name: &str,
     start: Pose,
-    iters: usize,
+    (iters, steps): (usize, PoseSteps),
     progress: std::ops::Range<f64>,
     seed: u64,
 ) -> Result<(Pose, f64, PhaseReport)> {
@@ -1465,7 +1491,7 @@ fn fit_silhouette(
     };
     let iters = iters.max(1);
     let depth = (start.translation - ctx.photo.camera.origin).length();
-    let (pose, loss, report) = fit_pose(name, start, iters, depth, |tape, pose_vars, eval| {
+    let (pose, loss, report) = fit_pose(name, start, iters, depth, steps, |tape, pose_vars, eval| {
         let t = (eval as f64 / iters as f64).min(1.0);
         let at = progress.start + t * (progress.end - progress.start);
         ctx.evaluate(tape, pose_vars, None, at, seed.wrapping_add(eval as u64))
@@ -1491,7 +1517,37 @@ fn refit_silhouette(
     settings: &Settings,
 ) -> Result<(Pose, f64, PhaseReport)> {
     let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
-    fit_silhouette(ctx, name, start, settings.silhouette_iters / 2, progress, settings.seed)
+    let iters = (settings.silhouette_iters / 2, PoseSteps::Full);
+    fit_silhouette(ctx, name, start, iters, progress, settings.seed)
+}
+
+/// The chosen pose (or its rival) fitted on to the outline's optimum: as
+/// many iterations as a start's fit, from where it ended, in smaller and
+/// smaller steps ([`PoseSteps::Polish`]), its turn about the axis kept
+/// (`init::on_axis_of`: colour chose it). The fits of the starts stop
+/// short where the outline tells a turn of the axis weakly: a can seen
+/// nearly end on (half the roughness of the suite's, tilted, in a Mitsuba
+/// twin of the sunset) was left 0.4 deg off across the lean at 57 % more
+/// silhouette loss than its true pose has; polished, 0.09 deg off (mirror
+/// error 8.64 -> 3.61 deg). On the suite's 18 Mitsuba twins at default
+/// quality: 4.11 / 0.90 / 0.60 -> 3.90 / 0.82 / 0.55 deg mirror / shiny /
+/// diffuse, 17 -> 18 poses found (the lying studio can's two halves,
+/// which had tied in the rival test, now score 1.5 to 2.5 dB apart, the
+/// right one higher, at photo seeds 0 to 3); at fast quality 5.95 / 1.59
+/// / 1.16 -> 5.67 / 1.34 / 0.97 deg. It costs a start's fit (about 0.2 s
+/// at default quality; the rival's alongside).
+fn polish_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings) -> Result<(Pose, PhaseReport)> {
+    let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
+    let iters = (settings.silhouette_iters, PoseSteps::Polish);
+    let (fitted, _, report) = fit_silhouette(ctx, "silhouette_polish", start, iters, progress, settings.seed)?;
+    let pose = init::on_axis_of(&start, &fitted, &ctx.probe.asset.mesh);
+    Ok((
+        pose,
+        PhaseReport {
+            pose: Some(PoseRecord::from(&pose)),
+            ..report
+        },
+    ))
 }
 
 /// The silhouette loss (the objective without rendering, priors spent) at
@@ -1520,7 +1576,7 @@ fn fit_pose_to_image(
     let photo = ctx.photo;
     let seed = settings.seed.wrapping_add(1000 * (round as u64 + 1));
     let iters = settings.pose_iters.max(1);
-    let (pose, _, report) = fit_pose("pose", start, iters, depth, |tape, pose_vars, eval| {
+    let (pose, _, report) = fit_pose("pose", start, iters, depth, PoseSteps::Full, |tape, pose_vars, eval| {
         let vars = ProbeVars::new(tape, ctx.probe.asset, false);
         let posed = PosedMesh::new(&vars.mesh, pose_vars);
         let rs = RenderSettings {
@@ -1738,7 +1794,7 @@ fn search_pose(
                 &ctx,
                 "silhouette",
                 start,
-                settings.silhouette_iters,
+                (settings.silhouette_iters, PoseSteps::Full),
                 progress,
                 settings.seed,
             )
@@ -1926,8 +1982,7 @@ fn search_pose(
     // suite's default run took the right end, its fast run the wrong one.
     let best = best_ranked(&starts, 0..starts.len(), symmetric).expect("at least one start");
     let chosen = refine(best, &mut starts, &mut candidates)?;
-    let mut pose = candidates[chosen];
-    let axis = pose.rotation * Vec3::Y;
+    let axis = candidates[chosen].rotation * Vec3::Y;
     let rival = match symmetric {
         true => axis_poses
             .iter()
@@ -1944,6 +1999,18 @@ fn search_pose(
             None => None,
         },
     };
+    // The rival polished as the chosen pose is, for a fair test (side by
+    // side, as the axes' fits run).
+    let polish = |pose: Pose| polish_silhouette(&ctx, pose, settings);
+    let (polished, rival) = rayon::join(|| polish(candidates[chosen]), || rival.map(polish).transpose());
+    let (mut pose, report) = polished?;
+    phases.expect_more(1);
+    phases.push(report);
+    let rival = rival?.map(|(rival, report)| {
+        phases.expect_more(1);
+        phases.push(report);
+        rival
+    });
     let depth = (pose.translation - photo.camera.origin).length();
     // The search-resolution map, from `start` (or from scratch), reported.
     let search_lighting = |pose: &Pose, start: Option<&[f64]>, phases: &mut PhaseLog| -> Result<LightingFit> {
@@ -2307,8 +2374,10 @@ pub fn estimate_with_progress(
             // patterned rivals, the can at half its roughness turned half
             // way round in a tilted courtyard scene was turned back (178.6
             // -> 2.1 deg); the suite's clipped studio can kept its right
-            // choice, and the lying studio can's two halves tied (to 0.004
-            // dB, the wrong one kept).
+            // choice, and the lying studio can's right half scored 1.5 to
+            // 2.5 dB above the other at photo seeds 0 to 3 (before both
+            // were polished to the outline's optimum they tied, to 0.004
+            // dB, and the wrong one was kept).
             let mut scored = None;
             let rival = match rival {
                 None => None,
@@ -2490,6 +2559,77 @@ pub fn estimate_with_progress(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use render::procedural::SodaCan;
+
+    #[test]
+    fn the_polish_takes_a_pose_to_the_outline_s_optimum_across_the_lean_and_keeps_its_turn() {
+        let asset = SodaCan::default().build();
+        let probe = Probe {
+            asset: &asset,
+            edges: EdgeAdjacency::new(&asset.mesh),
+            top_known: true,
+        };
+        // The can's axis 35 deg from the view ray, its lid towards the
+        // camera: a turn of the axis across the lean (sideways in the
+        // photo) moves the lid's outline little.
+        let truth = Pose::new(Quat::from_rotation_x(55f32.to_radians()), 1.0, Vec3::ZERO);
+        let camera = Camera::new(
+            320,
+            240,
+            30.0,
+            Vec3::new(0.0, 0.04, 0.3),
+            Vec3::new(0.0, 0.04, 0.0),
+            Vec3::Y,
+        )
+        .expect("camera");
+        let env = EnvMap::constant(8, [1.0; 3]);
+        let (image, mask) = render_image(
+            &asset,
+            &truth,
+            &camera,
+            &env,
+            &GgxMetal,
+            &RenderSettings { spp: 4, seed: 1 },
+        );
+        let photo = Photo::new(image, mask, camera).expect("a photo");
+        let reference = ReferenceMask::new(&photo.mask).expect("a mask");
+        let objective = Objective::paper_default();
+        let ctx = PoseContext {
+            probe: &probe,
+            photo: &photo,
+            reference: &reference,
+            objective: &objective,
+            front_facing: init::front_facing(&photo.camera),
+            clipped: &vec![false; photo.camera.pixel_count()],
+            level: mask_mean_luminance(&photo.image, &photo.mask).expect("a level"),
+        };
+        let axis = |p: &Pose| p.rotation * Vec3::Y;
+        let view = Vec3::new(0.0, 0.0, -1.0);
+        let across = axis(&truth).cross(axis(&truth).cross(view)).normalize();
+        let tipped = Quat::from_axis_angle(across, 1f32.to_radians()) * truth.rotation;
+        let start = init::turned(&Pose::new(tipped, 1.0, Vec3::new(0.0005, 0.0, 0.0)), &asset.mesh, 10.0);
+        let settings = Settings::new(Quality::Default);
+        let (polished, report) = polish_silhouette(&ctx, start, &settings).expect("a polish");
+        assert_eq!(report.name, "silhouette_polish");
+        let off = |p: &Pose| axis(p).angle_between(axis(&truth)).to_degrees();
+        // 1 -> 0.06 deg (the same iterations at a start's full steps: 0.11).
+        assert!(
+            off(&polished) < 0.1 * off(&start),
+            "axis {} -> {} deg off",
+            off(&start),
+            off(&polished)
+        );
+        let loss = |p: &Pose| silhouette_loss(&ctx, p, 0).expect("a loss");
+        assert!(
+            loss(&polished) < loss(&start),
+            "{} -> {}",
+            loss(&start),
+            loss(&polished)
+        );
+        // Its turn about the axis is the start's (the outline does not tell it).
+        let (about, _) = (polished.rotation * start.rotation.inverse()).to_axis_angle();
+        assert!(about.dot(axis(&start)).abs() < 1e-3, "turned about the axis: {about}");
+    }
 
     #[test]
     fn a_patterned_probe_s_rival_is_its_best_start_at_the_other_end_or_half_a_turn_away_if_it_ranked_close() {
