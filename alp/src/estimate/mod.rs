@@ -196,8 +196,10 @@ pub struct Settings {
     /// the lean's) must beat the searched one, and a rival the search's
     /// choice: the candidates' samples move with the pose, and a small
     /// gain is noise. (With both polished on to their outlines' optimum,
-    /// a cap's wrong end tied with the right one to 0.01 dB in two of 36
-    /// masks a pixel too wide or too narrow, and was kept.)
+    /// a cap's two ends tied to 0.002 dB with its mask a pixel too wide,
+    /// and the wrong one was kept; a tie now keeps the search's choice. On
+    /// the suite's 36 masks a pixel off, the margin changed which poses
+    /// fail, not how many: 28 found either way.)
     pub search_margin_db: f64,
     /// How far (degrees) the lean search may lean the searched pose either way.
     pub lean_reach_deg: f32,
@@ -2370,10 +2372,12 @@ pub fn estimate_with_progress(
             // end, where the outline hardly tells them apart; a patterned
             // probe's close-ranked other end or half turn): each one's
             // pilot map, and the pose searches' measure at each. On the
-            // suite's 9 caps (Mitsuba twins, default quality) the right
-            // end scored higher with every exact mask (by 0.7 to 14 dB),
-            // and in 17 of 18 masks a pixel too wide or too narrow, where
-            // the outline alone had chosen the wrong end in 4. Of the
+            // suite's 9 caps (Mitsuba twins, default quality, both poses
+            // polished) the right end scored higher with every exact mask
+            // (by 0.2 to 13.7 dB). Before the polish, and before patterned
+            // rivals, it had in 17 of 18 masks a pixel too wide or too
+            // narrow, where the outline alone had chosen the wrong end in
+            // 4 (49b97ac). Of the
             // patterned rivals, the can at half its roughness turned half
             // way round in a tilted courtyard scene was turned back (178.6
             // -> 2.1 deg); the suite's clipped studio can kept its right
