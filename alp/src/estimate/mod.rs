@@ -130,7 +130,8 @@ pub struct Settings {
     pub starts_deg: Vec<f32>,
     /// Axis hypotheses whose turns are ranked, at most.
     pub axes_kept: usize,
-    /// Adam iterations of the silhouette phase per start.
+    /// Adam iterations of the silhouette phase per start, and of the
+    /// polish of the chosen pose and of its rival ([`polish_silhouette`]).
     pub silhouette_iters: usize,
     /// Joint rounds after the search: the pose by Adam on the whole
     /// objective under the map solved at the pose so far, then the map at
