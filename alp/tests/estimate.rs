@@ -264,6 +264,9 @@ fn a_sharp_probe_s_map_is_solved_finer_than_its_pose_searches_maps() {
 fn the_size_and_lean_searches_account_for_every_candidate_and_keep_the_best_only_by_their_margin() {
     let (probe, _, photo, mut settings) = scene();
     (settings.size_step_px, settings.lean_step_deg) = (0.5, 0.3);
+    // A probe this small would have its pose refined by the photo instead
+    // of the lean search alone (next test).
+    settings.photo_refine_px = 0;
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     let searches = [
         ("lighting_size", result.report.size.as_ref(), settings.size_reach_px),
@@ -289,6 +292,45 @@ fn the_size_and_lean_searches_account_for_every_candidate_and_keep_the_best_only
                 .all(|p| p.pose.is_some() && p.loss.contains_key("data_weighted_sq_error"))
         );
     }
+}
+
+#[test]
+fn a_small_probe_s_pose_is_refined_by_the_photo_in_place_of_the_lean_search() {
+    let (probe, truth, photo, mut settings) = scene();
+    settings.lean_step_deg = 0.3;
+    assert!(
+        photo.mask.count() <= settings.photo_refine_px,
+        "{} px",
+        photo.mask.count()
+    );
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    let report = &result.report;
+    assert!(report.lean.is_none(), "the refinement searched the lean");
+    let steps = &report.photo_refinement;
+    // The can's label shows: its turn is searched, and it has no rival.
+    assert!(
+        steps.len() >= 3 && steps.len().is_multiple_of(3),
+        "{} searches",
+        steps.len()
+    );
+    for (k, step) in steps.iter().enumerate() {
+        assert_eq!(
+            (step.candidate, step.direction),
+            ("chosen", ["lean", "sway", "turn"][k % 3])
+        );
+    }
+    // Every candidate scored is a phase, the searched poses' scores
+    // carried from one search to the next.
+    let scored: usize = steps
+        .iter()
+        .map(|s| s.search.tried.iter().skip(1).filter(|t| t.1.is_finite()).count())
+        .sum();
+    let phases = report.phases.iter().filter(|p| p.name == "lighting_refine").count();
+    assert_eq!(phases, scored + 1, "the first search scores its start too");
+    let off = (result.pose.rotation * Vec3::Y)
+        .angle_between(truth.rotation * Vec3::Y)
+        .to_degrees();
+    assert!(off < 2.0, "axis {off} deg off");
 }
 
 #[test]

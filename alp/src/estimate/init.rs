@@ -377,6 +377,19 @@ pub fn leaned(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
     rotated(pose, mesh, Quat::from_axis_angle(tip, deg.to_radians()) * pose.rotation)
 }
 
+/// `pose` with its axis swayed by `deg` across the view (towards the lean
+/// frame's `axis x view`, see [`lean_frame`]) about the centre of its
+/// bounding box: square to the lean, the axis turns in the image's plane
+/// and keeps its angle to the view ray.
+pub fn swayed(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
+    let (axis, _, tip) = lean_frame(pose, mesh, camera);
+    rotated(
+        pose,
+        mesh,
+        Quat::from_axis_angle(axis.cross(tip).normalize(), deg.to_radians()) * pose.rotation,
+    )
+}
+
 /// `fitted`'s axis, place (the centre of its bounding box) and scale with
 /// `pose`'s turn about the axis: `pose` turned by the shortest arc that
 /// takes its axis on to `fitted`'s.
@@ -742,6 +755,38 @@ mod tests {
         assert!(tipped > 0.5f32.to_radians(), "the fit tipped the axis");
         assert!((angle - tipped).abs() < 1e-5, "turned {angle} rad, tipped {tipped}");
         assert!(about.dot(axis(&pose)).abs() < 1e-3, "turned about the axis: {about}");
+    }
+
+    #[test]
+    fn a_sway_turns_the_axis_across_the_view_keeping_its_angle_to_the_view_ray() {
+        let probe = SodaCan::default().build();
+        let camera = camera(0.06, 0.06);
+        let pose = Pose::new(
+            Quat::from_rotation_x(0.4) * Quat::from_rotation_y(0.7),
+            1.0,
+            Vec3::new(0.01, 0.0, 0.0),
+        );
+        let (lo, hi) = probe.mesh.bounds();
+        let centre = pose.transform_point(0.5 * (lo + hi));
+        let view = (centre - camera.origin).normalize();
+        let axis = |p: &Pose| (p.rotation * Vec3::Y).normalize();
+        for deg in [-0.5f32, 1.0] {
+            let swayed = swayed(&pose, &probe.mesh, &camera, deg);
+            assert!((swayed.transform_point(0.5 * (lo + hi)) - centre).length() < 1e-6);
+            let turned = axis(&swayed).angle_between(axis(&pose)).to_degrees();
+            assert!(
+                (turned - deg.abs()).abs() < 1e-3,
+                "swayed {deg}: the axis turned {turned} deg"
+            );
+            // Across the view: the axis keeps its angle to the view ray (to
+            // the cosine of the sway), where a lean would tip it by `deg`.
+            let to_view = |p: &Pose| axis(p).dot(view).asin().to_degrees();
+            assert!(
+                (to_view(&swayed) - to_view(&pose)).abs() < 0.01 * deg.abs(),
+                "swayed {deg}: the axis tipped {} deg towards the view ray",
+                to_view(&swayed) - to_view(&pose)
+            );
+        }
     }
 
     #[test]
