@@ -2778,14 +2778,26 @@ mod tests {
     use super::*;
     use render::procedural::SodaCan;
 
+    /// The probe `asset` as the estimate holds it (its top known).
+    fn probe_of(asset: &ProbeAsset) -> Probe<'_> {
+        Probe {
+            asset,
+            edges: EdgeAdjacency::new(&asset.mesh),
+            top_known: true,
+        }
+    }
+
+    /// A photo of `asset` at `truth` through `camera` under `env`, `spp`
+    /// samples per pixel.
+    fn photo_of(asset: &ProbeAsset, truth: &Pose, camera: Camera, env: &EnvMap, spp: u32) -> Photo {
+        let (image, mask) = render_image(asset, truth, &camera, env, &GgxMetal, &RenderSettings { spp, seed: 1 });
+        Photo::new(image, mask, camera).expect("a photo")
+    }
+
     #[test]
     fn the_photo_refines_a_small_can_s_axis_searching_its_lean_sway_and_turn_in_turn() {
         let asset = SodaCan::default().build();
-        let probe = Probe {
-            asset: &asset,
-            edges: EdgeAdjacency::new(&asset.mesh),
-            top_known: true,
-        };
+        let probe = probe_of(&asset);
         // A can 30 px wide in a 160x120 photo, under the courtyard: its
         // label and the light tell its pose, its outline hardly.
         let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
@@ -2800,15 +2812,7 @@ mod tests {
         .expect("camera");
         let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
         let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
-        let (image, mask) = render_image(
-            &asset,
-            &truth,
-            &camera,
-            &env,
-            &GgxMetal,
-            &RenderSettings { spp: 16, seed: 1 },
-        );
-        let photo = Photo::new(image, mask, camera).expect("a photo");
+        let photo = photo_of(&asset, &truth, camera, &env, 16);
         let settings = Settings::new(Quality::Default);
         assert!(photo_refines(&photo, &settings), "{} px", photo.mask.count());
         // Off as the outline leaves a small probe: leaned 1.5 deg, swayed
@@ -2910,11 +2914,7 @@ mod tests {
     #[test]
     fn the_polish_takes_a_pose_to_the_outline_s_optimum_across_the_lean_and_keeps_its_turn() {
         let asset = SodaCan::default().build();
-        let probe = Probe {
-            asset: &asset,
-            edges: EdgeAdjacency::new(&asset.mesh),
-            top_known: true,
-        };
+        let probe = probe_of(&asset);
         // The can's axis 35 deg from the view ray, its lid towards the
         // camera: a turn of the axis across the lean (sideways in the
         // photo) moves the lid's outline little.
@@ -2928,16 +2928,7 @@ mod tests {
             Vec3::Y,
         )
         .expect("camera");
-        let env = EnvMap::constant(8, [1.0; 3]);
-        let (image, mask) = render_image(
-            &asset,
-            &truth,
-            &camera,
-            &env,
-            &GgxMetal,
-            &RenderSettings { spp: 4, seed: 1 },
-        );
-        let photo = Photo::new(image, mask, camera).expect("a photo");
+        let photo = photo_of(&asset, &truth, camera, &EnvMap::constant(8, [1.0; 3]), 4);
         let reference = ReferenceMask::new(&photo.mask).expect("a mask");
         let objective = Objective::paper_default();
         let ctx = PoseContext {
