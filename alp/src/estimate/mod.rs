@@ -2527,14 +2527,16 @@ pub fn estimate_with_progress(
                 Ok(fit.into_map())
             };
             let (mut pose, mut map) = (pose, pilot_at(&pose, &mut phases)?);
+            // The pose `map` was solved at.
+            let mut piloted = pose;
             let searched = known_pose.is_none();
             let refine = searched && photo_refines(photo, settings);
-            let refine_by_photo = |candidate: &'static str,
-                                   pose: Pose,
-                                   start: &[f64],
-                                   scored: Option<(f64, Vec<f64>)>,
-                                   phases: &mut PhaseLog,
-                                   steps: &mut Vec<RefinementStep>| {
+            let refine_pose = |candidate: &'static str,
+                               pose: Pose,
+                               start: &[f64],
+                               scored: Option<(f64, Vec<f64>)>,
+                               phases: &mut PhaseLog,
+                               steps: &mut Vec<RefinementStep>| {
                 refine_by_photo(
                     &probe, photo, start, search_res, &clipped, settings, phases, patterned, candidate, pose, scored,
                     steps,
@@ -2576,7 +2578,7 @@ pub fn estimate_with_progress(
                     let mut chosen = score(&pose, &map, &mut phases)?;
                     if refine {
                         let scored = Some(chosen);
-                        (pose, chosen) = refine_by_photo("chosen", pose, &map, scored, &mut phases, &mut refinement)?;
+                        (pose, chosen) = refine_pose("chosen", pose, &map, scored, &mut phases, &mut refinement)?;
                     }
                     // Each rival's pilot map and score (refined as the
                     // chosen pose was); the best-scored one is the test's.
@@ -2584,21 +2586,25 @@ pub fn estimate_with_progress(
                     // data pixel) is no rival.
                     let db = |scored: &ScoredRival| scored.as_ref().map_or(f64::NEG_INFINITY, |((db, _), _)| *db);
                     let mut strongest = None;
-                    for mut rival in rivals {
+                    for rival_piloted in rivals {
+                        let mut rival = rival_piloted;
                         let rival_scored = pilot_at(&rival, &mut phases).and_then(|rival_map| {
                             let mut scored = score(&rival, &rival_map, &mut phases)?;
                             if refine {
                                 let known = Some(scored);
                                 (rival, scored) =
-                                    refine_by_photo("rival", rival, &rival_map, known, &mut phases, &mut refinement)?;
+                                    refine_pose("rival", rival, &rival_map, known, &mut phases, &mut refinement)?;
                             }
                             Ok((scored, rival_map))
                         });
-                        if strongest.as_ref().is_none_or(|(_, best)| db(&rival_scored) > db(best)) {
-                            strongest = Some((rival, rival_scored));
+                        if strongest
+                            .as_ref()
+                            .is_none_or(|(_, _, best)| db(&rival_scored) > db(best))
+                        {
+                            strongest = Some((rival, rival_piloted, rival_scored));
                         }
                     }
-                    let (rival, rival_scored) = strongest.expect("at least one rival");
+                    let (rival, rival_piloted, rival_scored) = strongest.expect("at least one rival");
                     let rival_db = db(&rival_scored);
                     let report = RivalReport {
                         rival_axis: (rival.rotation * Vec3::Y).to_array(),
@@ -2608,7 +2614,7 @@ pub fn estimate_with_progress(
                     };
                     scored = Some(match rival_scored {
                         Ok((rival_score, rival_map)) if report.kept_rival => {
-                            (pose, map) = (rival, rival_map);
+                            (pose, map, piloted) = (rival, rival_map, rival_piloted);
                             rival_score
                         }
                         _ => chosen,
@@ -2616,17 +2622,15 @@ pub fn estimate_with_progress(
                     Some(report)
                 }
             };
-            if refine {
-                if rival.is_none() {
-                    (pose, _) = refine_by_photo("chosen", pose, &map, None, &mut phases, &mut refinement)?;
-                }
-                // The kept pose's own pilot map, if the photo moved it: the
-                // refinement's maps were solved from the map of where it began.
-                if refinement.iter().any(|step| step.search.kept != 0.0) {
-                    phases.expect_more(1);
-                    map = pilot_at(&pose, &mut phases)?;
-                    scored = None;
-                }
+            if refine && rival.is_none() {
+                (pose, _) = refine_pose("chosen", pose, &map, None, &mut phases, &mut refinement)?;
+            }
+            // The kept pose's own pilot map, if the photo moved it: the
+            // refinement's maps were solved from the map of where it began.
+            if pose != piloted {
+                phases.expect_more(1);
+                map = pilot_at(&pose, &mut phases)?;
+                scored = None;
             }
             let mut search =
                 |phase: &str, (step, reach): (f32, f32), pixels: Pixels, candidate: &dyn Fn(&Pose, f32) -> Pose| {
