@@ -330,7 +330,9 @@ fn a_small_probe_s_pose_is_refined_by_the_photo_in_place_of_the_lean_search() {
     let off = (result.pose.rotation * Vec3::Y)
         .angle_between(truth.rotation * Vec3::Y)
         .to_degrees();
-    assert!(off < 2.0, "axis {off} deg off");
+    // 0.18 deg, as with the lean search alone: this can's outline pins its
+    // axis already (the refinement's gain is `refine_by_photo`'s test's).
+    assert!(off < 0.5, "axis {off} deg off");
 }
 
 #[test]

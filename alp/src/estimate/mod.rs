@@ -89,7 +89,7 @@ use render::integrator::{
     LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples, light_samples_with, render_image,
 };
 use render::lookup::ImageVars;
-use render::mesh::EdgeAdjacency;
+use render::mesh::{EdgeAdjacency, Mesh};
 use render::pose::Pose;
 use render::posed::{POSE_PARAMS, PoseVars, PosedMesh, pack_pose, unpack_pose};
 use render::probe::ProbeAsset;
@@ -2211,8 +2211,8 @@ fn pose_score(
 /// from the map `start` (`scored`: the searched pose's score and map,
 /// when they are known already). A candidate is kept only if it beats the
 /// searched pose by [`Settings::search_margin_db`]. Each candidate scored
-/// is a phase named `phase`. Returns the kept pose, its map and the
-/// search's account.
+/// is a phase named `phase`. Returns the kept pose, its score and map, and
+/// the search's account.
 #[allow(clippy::too_many_arguments)]
 fn pose_line_search(
     probe: &Probe,
@@ -2227,7 +2227,7 @@ fn pose_line_search(
     pixels: Pixels,
     mut scored: Option<(f64, Vec<f64>)>,
     candidate: impl Fn(f32) -> Pose,
-) -> Result<(Pose, Vec<f64>, LineSearchReport)> {
+) -> Result<(Pose, (f64, Vec<f64>), LineSearchReport)> {
     // The searched pose's map, and the best candidate's (not their transports).
     let mut centre: Option<Vec<f64>> = None;
     let mut best: Option<(f32, Vec<f64>, f64)> = None;
@@ -2263,11 +2263,11 @@ fn pose_line_search(
         Ok(score)
     })?;
     let (x, map, score) = best.expect("the line search scores the searched pose");
-    let (kept, map) = match score > tried[0].1 + settings.search_margin_db {
-        true => (x, map),
-        false => (0.0, centre.expect("the searched pose is scored first")),
+    let (kept, kept_scored) = match score > tried[0].1 + settings.search_margin_db {
+        true => (x, (score, map)),
+        false => (0.0, (tried[0].1, centre.expect("the searched pose is scored first"))),
     };
-    Ok((candidate(kept), map, LineSearchReport { tried, kept }))
+    Ok((candidate(kept), kept_scored, LineSearchReport { tried, kept }))
 }
 
 /// Rounds at most of [`refine_by_photo`].
@@ -2330,13 +2330,18 @@ fn refine_by_photo(
     let (mut pose, mut scored) = (pose, scored);
     let lean = (settings.lean_step_deg, settings.lean_reach_deg);
     let turn = (TURN_PER_LEAN * lean.0, TURN_PER_LEAN * lean.1);
-    let directions = [("lean", lean), ("sway", lean), ("turn", turn)];
+    type Move = fn(&Pose, &Mesh, &Camera, f32) -> Pose;
+    let directions: [(&'static str, (f32, f32), Move); 3] = [
+        ("lean", lean, init::leaned),
+        ("sway", lean, init::swayed),
+        ("turn", turn, |pose, mesh, _, deg| init::turned(pose, mesh, deg)),
+    ];
     let (mesh, camera) = (&probe.asset.mesh, &photo.camera);
     for _ in 0..PHOTO_REFINE_ROUNDS {
         let mut moved = false;
-        for &(direction, reach) in &directions[..2 + patterned as usize] {
+        for &(direction, reach, moved_by) in &directions[..2 + patterned as usize] {
             let from = pose;
-            let (kept, map, search) = pose_line_search(
+            let (kept, kept_scored, search) = pose_line_search(
                 probe,
                 photo,
                 start,
@@ -2348,19 +2353,10 @@ fn refine_by_photo(
                 reach,
                 Pixels::All,
                 scored.take(),
-                |x| match direction {
-                    "lean" => init::leaned(&from, mesh, camera, x),
-                    "sway" => init::swayed(&from, mesh, camera, x),
-                    _ => init::turned(&from, mesh, x),
-                },
+                |x| moved_by(&from, mesh, camera, x),
             )?;
-            let score = search
-                .tried
-                .iter()
-                .find(|(x, _)| *x == search.kept)
-                .map_or(f64::NEG_INFINITY, |(_, score)| *score);
             moved |= search.kept != 0.0;
-            (pose, scored) = (kept, Some((score, map)));
+            (pose, scored) = (kept, Some(kept_scored));
             steps.push(RefinementStep {
                 candidate,
                 direction,
@@ -2650,7 +2646,7 @@ pub fn estimate_with_progress(
                         Pixels::All => scored.take(),
                         _ => None,
                     };
-                    let (kept, kept_map, report) = pose_line_search(
+                    let (kept, (_, kept_map), report) = pose_line_search(
                         &probe,
                         photo,
                         &map,
@@ -2808,7 +2804,7 @@ mod tests {
     fn the_photo_refines_a_small_can_s_axis_searching_its_lean_sway_and_turn_in_turn() {
         let asset = SodaCan::default().build();
         let probe = probe_of(&asset);
-        // A can 30 px wide in a 160x120 photo, under the courtyard: its
+        // A can of 1,713 px in a 160x120 photo, under the courtyard: its
         // label and the light tell its pose, its outline hardly.
         let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
         let camera = Camera::new(
@@ -2826,7 +2822,7 @@ mod tests {
         let settings = Settings::new(Quality::Default);
         assert!(photo_refines(&photo, &settings), "{} px", photo.mask.count());
         // Off as the outline leaves a small probe: leaned 1.5 deg, swayed
-        // 0.5, turned 3 (1,713 px).
+        // 0.5, turned 3.
         let (mesh, camera) = (&asset.mesh, &photo.camera);
         let start = init::turned(
             &init::swayed(&init::leaned(&truth, mesh, camera, 1.5), mesh, camera, 0.5),
