@@ -45,12 +45,11 @@
 //! started from it, the mirror sphere's error on five scenes was 10.4 deg
 //! against 8.9);
 //! the *rival* test, where the search's choice has a close rival (a
-//! symmetric probe's other end; a patterned probe's other end or half turn
-//! that ranked close, its yaw refined likewise): each one's pilot map, and
-//! the lean's measure at each, the higher kept;
+//! symmetric probe's other end; a patterned probe's best other end and best
+//! half turn, each if it ranked close, its yaw refined likewise): each one's
+//! pilot map, and the lean's measure at each, the highest kept;
 //! for a probe small in the photo (`Settings::photo_refine_px`), before
-//! that test, the photo's *refinement* of the chosen pose and of each rival
-//! (a patterned probe's best other end and best half turn both): rounds of
+//! that test, the photo's *refinement* of the chosen pose and of each rival: rounds of
 //! line searches over the lean, the sway and the turn (`refine_by_photo`),
 //! in place of the lean search below;
 //! on request (`Settings::size_step_px`) the *size* line search (the
@@ -682,9 +681,10 @@ pub struct Report {
     pub chosen_start: Option<usize>,
     /// The test of the chosen pose against its rival (none without one):
     /// a probe symmetric about its axis whose other end's outline fits
-    /// nearly as well, or one with a pattern whose other end or half turn
-    /// ranked close ([`RIVAL_RANK_DEG`]). The phases `lighting_rival` carry
-    /// both poses.
+    /// nearly as well, or one with a pattern whose best other end or best
+    /// half turn ranked close ([`RIVAL_RANK_DEG`]; of two such, the one
+    /// that scored higher). The phases `lighting_rival` carry every pose
+    /// judged.
     pub rival: Option<RivalReport>,
     /// The size line search (none unless asked for: `size_step_px` above
     /// 0, `alp estimate --size-search`; nor when the pose was given or
@@ -1739,12 +1739,15 @@ fn record(
 const RIVAL_RANK_DEG: f64 = 1.0;
 
 /// The rivals of start `chosen` (see [`RIVAL_RANK_DEG`]): the best-ranked
-/// start at the other end of the probe (its axis the other way) or half a
-/// turn away about the same axis, if it ranked within the margin; with
-/// `each_kind`, the best of each kind that did (a small probe's, which the
-/// photo refines before it judges: an end and a half turn both ranked
-/// close, and the best of the two was the wrong end's half turn).
-fn rival_starts(starts: &[StartReport], candidates: &[Pose], chosen: usize, each_kind: bool) -> Vec<usize> {
+/// start at the other end of the probe (its axis the other way) and the
+/// best-ranked half a turn away about the same axis, each if it ranked
+/// within the margin. Each kind's best, not only the better of the two: a
+/// mask a pixel off turns how a probe's starts rank (the upright studio
+/// cap's mask a pixel too wide ranked a half turn of the wrong end above
+/// the right end, whose map then scored 1.65 dB higher), and a small probe
+/// refined by the photo had an end and a half turn both rank close, the
+/// better ranked the wrong end's half turn.
+fn rival_starts(starts: &[StartReport], candidates: &[Pose], chosen: usize) -> Vec<usize> {
     let axis = candidates[chosen].rotation * Vec3::Y;
     let other_end = |k: usize| (candidates[k].rotation * Vec3::Y).dot(axis) < 0.0;
     let half_turn = |k: usize| {
@@ -1753,17 +1756,11 @@ fn rival_starts(starts: &[StartReport], candidates: &[Pose], chosen: usize, each
     };
     let close = |k: &usize| starts[*k].rgb_angle_deg - starts[chosen].rgb_angle_deg <= RIVAL_RANK_DEG;
     let best = |kind: &dyn Fn(usize) -> bool| best_ranked(starts, (0..starts.len()).filter(|&k| kind(k)), false);
-    match each_kind {
-        true => [best(&other_end), best(&half_turn)]
-            .into_iter()
-            .flatten()
-            .filter(close)
-            .collect(),
-        false => best(&|k| other_end(k) || half_turn(k))
-            .filter(close)
-            .into_iter()
-            .collect(),
-    }
+    [best(&other_end), best(&half_turn)]
+        .into_iter()
+        .flatten()
+        .filter(close)
+        .collect()
 }
 
 /// The best-ranked of the starts `among` (the first of equals), by colour
@@ -2049,7 +2046,7 @@ fn search_pose(
             .collect(),
         false => {
             let mut rivals = Vec::new();
-            for k in rival_starts(&starts, &candidates, chosen, photo_refines(photo, settings)) {
+            for k in rival_starts(&starts, &candidates, chosen) {
                 let refined = refine(k, &mut starts, &mut candidates)?;
                 rivals.push(candidates[refined]);
             }
@@ -2547,7 +2544,7 @@ pub fn estimate_with_progress(
             let mut refinement = Vec::new();
             // The chosen pose against its rival (a symmetric probe's other
             // end, where the outline hardly tells them apart; a patterned
-            // probe's close-ranked other end or half turn): each one's
+            // probe's close-ranked best other end and best half turn): each one's
             // pilot map, and the pose searches' measure at each. On the
             // suite's 9 caps (Mitsuba twins, default quality, both poses
             // polished) the right end scored higher with every exact mask
@@ -2975,7 +2972,7 @@ mod tests {
     }
 
     #[test]
-    fn a_patterned_probe_s_rivals_are_its_best_starts_at_the_other_end_or_half_a_turn_away_if_they_ranked_close() {
+    fn a_patterned_probe_s_rivals_are_its_best_starts_at_the_other_end_and_half_a_turn_away_if_they_ranked_close() {
         let start = |axis: usize, yaw_deg: f32, rgb_angle_deg: f64| StartReport {
             axis,
             yaw_deg,
@@ -2989,32 +2986,29 @@ mod tests {
         let turn = |yaw: f32| Quat::from_rotation_y(yaw.to_radians());
         let up = |yaw: f32| Pose::new(turn(yaw), 1.0, Vec3::ZERO);
         let down = |yaw: f32| Pose::new(Quat::from_rotation_x(std::f32::consts::PI) * turn(yaw), 1.0, Vec3::ZERO);
-        let rivals = |angles: [f64; 4], each_kind: bool| {
+        let rivals = |angles: [f64; 4]| {
             let starts = [
                 start(0, 10.0, angles[0]),
                 start(0, 60.0, angles[1]),
                 start(0, -170.0, angles[2]),
                 start(1, 20.0, angles[3]),
             ];
-            rival_starts(&starts, &[up(10.0), up(60.0), up(-170.0), down(20.0)], 0, each_kind)
+            rival_starts(&starts, &[up(10.0), up(60.0), up(-170.0), down(20.0)], 0)
         };
-        // A nearby turn is no rival, however close it ranked.
+        // A nearby turn is no rival, however close it ranked; the best of
+        // each kind that ranked close is.
         assert_eq!(
-            rivals([10.0, 10.1, 10.6, 10.4], false),
-            [3],
-            "the other end, ranked best of the rivals"
+            rivals([10.0, 10.1, 10.6, 10.4]),
+            [3, 2],
+            "the other end and half a turn away"
         );
-        assert_eq!(rivals([10.0, 10.1, 10.6, 11.5], false), [2], "half a turn away");
+        assert_eq!(rivals([10.0, 10.1, 10.6, 11.5]), [2], "half a turn away");
+        assert_eq!(rivals([10.0, 10.1, 11.1, 10.4]), [3], "the other end");
         assert_eq!(
-            rivals([10.0, 10.1, 11.1, 11.5], false),
+            rivals([10.0, 10.1, 11.1, 11.5]),
             [0usize; 0],
             "both ranked too far behind"
         );
-        // A small probe's: the best of each kind that ranked close.
-        assert_eq!(rivals([10.0, 10.1, 10.6, 10.4], true), [3, 2]);
-        assert_eq!(rivals([10.0, 10.1, 10.6, 11.5], true), [2]);
-        assert_eq!(rivals([10.0, 10.1, 11.1, 10.4], true), [3]);
-        assert_eq!(rivals([10.0, 10.1, 11.1, 11.5], true), [0usize; 0]);
     }
 
     #[test]
