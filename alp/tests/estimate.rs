@@ -9,6 +9,7 @@ use render::envmap::EnvMap;
 use render::image_io::Mask;
 use render::integrator::{RenderSettings, render_image};
 use render::pose::Pose;
+use render::probe::ProbeAsset;
 use render::procedural::{SodaCan, ThermosCap, UvSphere};
 
 /// A 160x120 photo (16 spp) of `probe` at `truth` from `eye`, looking at
@@ -107,13 +108,10 @@ fn a_cap_of_one_colour_leaning_away_is_found_the_right_way_up() {
     assert!(deg < 5.0, "probe axis off by {deg} degrees");
 }
 
-#[test]
-fn a_cap_whose_mask_is_a_pixel_too_narrow_is_turned_the_right_way_up_by_the_photo() {
-    // The cap leaning 17 deg away as above, in a 320x240 photo whose mask
-    // lost its outer ring of pixels (as `tools/eval_suite.py --mask-error
-    // -1` shrinks it): the best outline is the cap turned end for end
-    // (179.8 deg off), and the photo, lit from each end's pilot map,
-    // scores the right end higher (13.3 against 11.9 dB).
+/// The cap leaning 17 deg away as above, in a 320x240 photo whose mask
+/// lost its outer ring of pixels (as `tools/eval_suite.py --mask-error -1`
+/// shrinks it): the probe, its true pose and the photo.
+fn cap_with_a_mask_a_pixel_too_narrow() -> (ProbeAsset, Pose, Photo) {
     let probe = ThermosCap::default().build();
     let lean = Quat::from_rotation_x(-17f32.to_radians());
     let truth = Pose::new(lean * Quat::from_rotation_y(0.7), 1.0, Vec3::ZERO);
@@ -136,16 +134,29 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_is_turned_the_right_way_up_by_the_phot
         .collect();
     let narrow = Mask::new(w as usize, h as usize, narrow);
     let photo = Photo::new(exact.image.clone(), narrow, exact.camera).expect("a valid photo");
+    (probe, truth, photo)
+}
+
+/// How far (degrees) `axis` is from the axis of `truth`.
+fn axis_off(axis: Vec3, truth: &Pose) -> f32 {
+    axis.dot(truth.rotation * Vec3::Y).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+#[test]
+fn a_cap_whose_mask_is_a_pixel_too_narrow_is_turned_the_right_way_up_by_the_photo() {
+    // The best outline is the cap turned end for end (179.8 deg off), and
+    // the photo, lit from each end's pilot map, scores the right end higher
+    // (13.3 against 11.9 dB).
+    let (probe, truth, photo) = cap_with_a_mask_a_pixel_too_narrow();
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
     // The lean search starts from the kept end's score.
     settings.lean_step_deg = 0.3;
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
-    let off = |axis: Vec3| axis.dot(truth.rotation * Vec3::Y).clamp(-1.0, 1.0).acos().to_degrees();
     let report = &result.report;
     let ends = report.rival.as_ref().expect("a symmetric probe's ends are tested");
     let chosen = &report.starts[report.chosen_start.expect("the pose was searched")];
-    let outline = off(Vec3::from_array(report.axes[chosen.axis].fitted_axis));
+    let outline = axis_off(Vec3::from_array(report.axes[chosen.axis].fitted_axis), &truth);
     assert!(
         outline > 170.0,
         "the outline alone chose the end {outline} deg off: no test of the photo's"
@@ -153,7 +164,43 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_is_turned_the_right_way_up_by_the_phot
     assert!(ends.kept_rival && ends.rival_db > ends.chosen_db, "{ends:?}");
     let lean = report.lean.as_ref().expect("a lean search");
     assert_eq!(lean.tried[0], (0.0, ends.rival_db));
-    let deg = off(result.pose.rotation * Vec3::Y);
+    let deg = axis_off(result.pose.rotation * Vec3::Y, &truth);
+    assert!(deg < 5.0, "probe axis off by {deg} degrees");
+}
+
+#[test]
+fn the_size_search_goes_ahead_of_the_rival_test_and_the_rival_grows_with_the_chosen_pose() {
+    let (probe, truth, photo) = cap_with_a_mask_a_pixel_too_narrow();
+    let mut settings = Settings::new(Quality::Fast);
+    settings.env_size = (64, 32);
+    (settings.size_step_px, settings.lean_step_deg) = (0.5, 0.3);
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    let report = &result.report;
+    let size = report.size.as_ref().expect("a size search");
+    // (The search moves the wrong end's outline, the one chosen: -0.62 px.)
+    assert!(size.kept != 0.0, "no size kept, so no growth to test: {size:?}");
+    let at = |name: &str| -> Vec<usize> {
+        (0..report.phases.len())
+            .filter(|&k| report.phases[k].name == name)
+            .collect()
+    };
+    let (sizes, rivals) = (at("lighting_size"), at("lighting_rival"));
+    assert!(!sizes.is_empty() && !rivals.is_empty(), "{sizes:?} {rivals:?}");
+    assert!(
+        sizes.iter().max() < rivals.iter().min(),
+        "sizes {sizes:?}, rivals {rivals:?}"
+    );
+    // The rival test scores the chosen pose, then its rival, each at its
+    // own probe size: the size the search kept, for both.
+    let scale = |k: usize| report.phases[k].pose.as_ref().expect("a pose").scale;
+    let chosen_scale = scale(rivals[0]);
+    assert!(
+        (scale(rivals[1]) - chosen_scale).abs() < 1e-4 * chosen_scale,
+        "kept {} px: the chosen pose's scale {chosen_scale}, the rival's {}",
+        size.kept,
+        scale(rivals[1])
+    );
+    let deg = axis_off(result.pose.rotation * Vec3::Y, &truth);
     assert!(deg < 5.0, "probe axis off by {deg} degrees");
 }
 
