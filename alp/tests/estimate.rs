@@ -103,8 +103,7 @@ fn a_cap_of_one_colour_leaning_away_is_found_the_right_way_up() {
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
-    let axis = (result.pose.rotation * Vec3::Y).dot(truth.rotation * Vec3::Y);
-    let deg = axis.clamp(-1.0, 1.0).acos().to_degrees();
+    let deg = axis_off(result.pose.rotation * Vec3::Y, &truth);
     assert!(deg < 5.0, "probe axis off by {deg} degrees");
 }
 

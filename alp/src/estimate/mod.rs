@@ -2479,7 +2479,7 @@ pub fn estimate_with_progress(
         expected: settings.phase_count(),
         on_phase,
     };
-    let (pose, rivals, axes, starts, chosen, patterned) = match known_pose {
+    let (pose, mut rivals, axes, starts, chosen, patterned) = match known_pose {
         Some(pose) => (pose, Vec::new(), Vec::new(), Vec::new(), None, false),
         None => {
             let search = search_pose(&probe, photo, &reference, &clipped, search_res, settings, &mut phases)?;
@@ -2605,10 +2605,9 @@ pub fn estimate_with_progress(
             // The pose `map` was solved at (the size search's map where it
             // left the pose).
             let mut piloted = pose;
-            let rivals: Vec<Pose> = match &size {
-                Some(size) => rivals.iter().map(|rival| grown(rival, size.kept)).collect(),
-                None => rivals,
-            };
+            if let Some(size) = &size {
+                rivals.iter_mut().for_each(|rival| *rival = grown(rival, size.kept));
+            }
             let mut refinement = Vec::new();
             // The chosen pose against its rival (a symmetric probe's other
             // end, where the outline hardly tells them apart; a patterned
