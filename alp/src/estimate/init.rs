@@ -4,7 +4,7 @@
 //! points (upright, along the mask's principal direction, end-on); turns
 //! about the axis (yaws) make the orientation starts.
 
-use glam::{Mat3, Quat, Vec2, Vec3};
+use glam::{DMat3, DVec3, Mat3, Quat, Vec2, Vec3};
 use render::camera::Camera;
 use render::image_io::Mask;
 use render::mesh::Mesh;
@@ -19,16 +19,146 @@ const DISTINCT_SPREAD: f64 = 1.05;
 /// mesh was built along it (faceting tilts the found axis a little).
 const AXIS_IS_Y_DEG: f64 = 1.0;
 
+/// A facet's normal line passes within this fraction of the surface's size
+/// (RMS distance from its centroid) of an axis of revolution it belongs to,
+/// measured as `((p - c) x n) . a`: faceting leaves a third of a 64-sided
+/// can's triangles within 1 %, all within 5 % (a triangle's centroid is off
+/// its quad's meridian); the surface has that axis when at least
+/// [`REVOLVED_SHARE`] of its area does.
+const ON_AXIS: f64 = 0.05;
+
+/// An axis of revolution is one only when the next best line leaves this
+/// many times its residual (the suite's can, cap and ring: 780 to 3,900
+/// times; a sphere, 1.1).
+const SECOND_AXIS_RATIO: f64 = 20.0;
+
+/// Fits of the axis of revolution, each weighing the facets by how far the
+/// one before left their normal lines from it.
+const REWEIGHTINGS: usize = 8;
+
+/// The share of a probe's surface that must be of revolution about one
+/// axis for that to be its axis (a mug's body without its handle).
+const REVOLVED_SHARE: f64 = 0.6;
+
 /// The rotation that turns the probe's axis to mesh +Y: the estimate turns
 /// the probe about +Y (its yaw starts) and reads its length along it. The
-/// axis is the principal direction of the surface's spread (area-weighted
-/// second moments) whose spread stands out from the other two: the
-/// longest for a probe longer than wide (a can), the shortest for one wider
-/// than long (a ring, a squat cap); an axis of revolution is such a
-/// direction. Identity when the axis is already +Y (to [`AXIS_IS_Y_DEG`])
-/// or none stands out (a sphere). Of the axis's two directions, the one
-/// nearer +Y, or with its largest component positive, goes to +Y.
+/// axis is the probe's axis of revolution ([`axis_of_revolution`]: a mug's
+/// body's, whose handle the spread of the surface would take for the
+/// axis), else the principal direction of the surface's spread
+/// (area-weighted second moments) whose spread stands out from the other
+/// two: the longest for a probe longer than wide, the shortest for one
+/// wider than long. Identity when the axis is already +Y (to
+/// [`AXIS_IS_Y_DEG`]) or none stands out (a sphere). Of the axis's two
+/// directions, the one nearer +Y, or with its largest component positive,
+/// goes to +Y.
 pub fn axis_to_y(mesh: &Mesh) -> Quat {
+    let Some(axis) = axis_of_revolution(mesh).or_else(|| axis_of_spread(mesh)) else {
+        return Quat::IDENTITY;
+    };
+    if axis.y.abs() >= AXIS_IS_Y_DEG.to_radians().cos() {
+        return Quat::IDENTITY;
+    }
+    let largest = axis.abs().max_element();
+    let positive = match axis.y.abs() > 1e-3 {
+        true => axis.y > 0.0,
+        false => axis
+            .to_array()
+            .iter()
+            .find(|v| v.abs() == largest)
+            .is_some_and(|v| *v > 0.0),
+    };
+    let axis = if positive { axis } else { -axis };
+    Quat::from_rotation_arc(axis.as_vec3().normalize(), Vec3::Y)
+}
+
+/// The facets of `mesh`: centroid, unit normal and area (degenerate ones
+/// left out).
+fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
+    mesh.triangles
+        .iter()
+        .filter_map(|tri| {
+            let [a, b, c] = tri.map(|i| mesh.positions[i as usize].as_dvec3());
+            let cross = (b - a).cross(c - a);
+            let area = 0.5 * cross.length();
+            (area > 0.0).then(|| ((a + b + c) / 3.0, cross / (2.0 * area), area))
+        })
+        .collect()
+}
+
+/// The unit direction of the line about which at least [`REVOLVED_SHARE`]
+/// of the surface is of revolution, if there is one line only (a sphere,
+/// of revolution about every line through its centre, has none). Every
+/// normal line of a surface of revolution meets its axis (or runs parallel
+/// to it): with the axis's direction `a` and moment `m = c x a` (`c` a
+/// point on it), each facet's `(p x n) . a + n . m` is 0 (`p` its centroid,
+/// `n` its normal; Pottmann and Randrup's line-geometric test for surfaces
+/// of revolution). Least squares over the facets' areas gives `m` for
+/// each `a`, and `a` as the least eigenvector of what is left; facets off
+/// the axis (a handle) are then weighed down and the fit repeated.
+pub fn axis_of_revolution(mesh: &Mesh) -> Option<DVec3> {
+    let facets = facets(mesh);
+    let area: f64 = facets.iter().map(|f| f.2).sum();
+    let centroid = facets.iter().map(|(p, _, w)| *p * *w).sum::<DVec3>() / area.max(1e-300);
+    let size = (facets
+        .iter()
+        .map(|(p, _, w)| w * (*p - centroid).length_squared())
+        .sum::<f64>()
+        / area.max(1e-300))
+    .sqrt();
+    if !size.is_finite() || size <= 0.0 {
+        return None;
+    }
+    // Centred and in units of the size: the residual is then a distance in sizes.
+    let lines: Vec<(DVec3, DVec3)> = facets.iter().map(|(p, n, _)| ((*p - centroid) / size, *n)).collect();
+    let mut weight: Vec<f64> = facets.iter().map(|f| f.2 / area).collect();
+    let mut found = None;
+    for _ in 0..REWEIGHTINGS {
+        let outer = |u: DVec3, v: DVec3| DMat3::from_cols(u * v.x, u * v.y, u * v.z);
+        let (mut nn, mut mn, mut mm) = (DMat3::ZERO, DMat3::ZERO, DMat3::ZERO);
+        for ((p, n), &w) in lines.iter().zip(&weight) {
+            let pn = p.cross(*n);
+            nn += outer(*n, *n) * w;
+            mn += outer(pn, *n) * w;
+            mm += outer(pn, pn) * w;
+        }
+        if nn.determinant().abs() < 1e-12 {
+            return None;
+        }
+        // The moment that fits direction a best is -nn^-1 mn^T a; what is
+        // left is a^T (mm - mn nn^-1 mn^T) a.
+        let to_moment = -(nn.inverse() * mn.transpose());
+        let left = mm + mn * to_moment;
+        let (values, vectors) = symmetric_eigen(std::array::from_fn(|i| std::array::from_fn(|j| left.col(j)[i])));
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| values[i].total_cmp(&values[j]));
+        let axis = DVec3::from_array(vectors[order[0]]);
+        let moment = to_moment * axis;
+        let residual: Vec<f64> = lines
+            .iter()
+            .map(|(p, n)| (p.cross(*n).dot(axis) + n.dot(moment)).abs())
+            .collect();
+        weight = facets
+            .iter()
+            .zip(&residual)
+            .map(|(f, r)| f.2 / area / (1.0 + (r / ON_AXIS).powi(2)))
+            .collect();
+        let revolved: f64 = facets
+            .iter()
+            .zip(&residual)
+            .filter(|(_, r)| **r <= ON_AXIS)
+            .map(|(f, _)| f.2)
+            .sum();
+        // A second line that fits about as well: all normal lines pass
+        // through one point (a sphere), and every line through it is an axis.
+        let single = values[order[1]] >= SECOND_AXIS_RATIO * values[order[0]].max(1e-12);
+        found = (single && revolved >= REVOLVED_SHARE * area).then_some(axis);
+    }
+    found
+}
+
+/// The principal direction of the surface's spread that stands out from
+/// the other two, if one does (see [`axis_to_y`]).
+fn axis_of_spread(mesh: &Mesh) -> Option<DVec3> {
     let (mut area, mut first, mut second) = (0.0f64, [0.0f64; 3], [[0.0f64; 3]; 3]);
     for tri in &mesh.triangles {
         let [a, b, c] = tri.map(|i| mesh.positions[i as usize].as_dvec3());
@@ -44,7 +174,7 @@ pub fn axis_to_y(mesh: &Mesh) -> Quat {
         }
     }
     if area <= 0.0 {
-        return Quat::IDENTITY;
+        return None;
     }
     let mean = first.map(|m| m / area);
     let spread: [[f64; 3]; 3] =
@@ -57,21 +187,7 @@ pub fn axis_to_y(mesh: &Mesh) -> Quat {
         true => (high / mid, vectors[order[2]]),
         false => (mid / low, vectors[order[0]]),
     };
-    let axis = glam::DVec3::from_array(axis);
-    if stands_out < DISTINCT_SPREAD || axis.y.abs() >= AXIS_IS_Y_DEG.to_radians().cos() {
-        return Quat::IDENTITY;
-    }
-    let largest = axis.abs().max_element();
-    let positive = match axis.y.abs() > 1e-3 {
-        true => axis.y > 0.0,
-        false => axis
-            .to_array()
-            .iter()
-            .find(|v| v.abs() == largest)
-            .is_some_and(|v| *v > 0.0),
-    };
-    let axis = if positive { axis } else { -axis };
-    Quat::from_rotation_arc(axis.as_vec3().normalize(), Vec3::Y)
+    (stands_out >= DISTINCT_SPREAD).then(|| DVec3::from_array(axis))
 }
 
 /// Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix, by cyclic
@@ -509,6 +625,124 @@ mod tests {
             let axis = to_y * (turn * Vec3::Y);
             assert!(axis.y.abs() > 0.9999, "the axis goes to {axis}");
         }
+    }
+
+    /// A closed tube swept along `centre(t)` (t in [0, 1], `rings` steps)
+    /// with a circle of `radius` in the plane of `across(t)`'s two unit
+    /// vectors, `sides` facets round: a mug's body (swept along its axis)
+    /// or its handle (along an arc beside it).
+    fn tube(
+        centre: impl Fn(f32) -> Vec3,
+        across: impl Fn(f32) -> (Vec3, Vec3),
+        radius: f32,
+        (rings, sides): (usize, usize),
+        mesh: &mut (Vec<Vec3>, Vec<[u32; 3]>),
+    ) {
+        let first = mesh.0.len() as u32;
+        for k in 0..=rings {
+            let t = k as f32 / rings as f32;
+            let (u, v) = across(t);
+            for l in 0..sides {
+                let s = std::f32::consts::TAU * l as f32 / sides as f32;
+                mesh.0.push(centre(t) + radius * (s.cos() * u + s.sin() * v));
+            }
+        }
+        let at = |k: usize, l: usize| first + (k * sides + l % sides) as u32;
+        for k in 0..rings {
+            for l in 0..sides {
+                mesh.1.push([at(k, l), at(k, l + 1), at(k + 1, l + 1)]);
+                mesh.1.push([at(k, l), at(k + 1, l + 1), at(k + 1, l)]);
+            }
+        }
+    }
+
+    /// A mug built along +Y: a body 80 mm across and 95 mm tall, closed at
+    /// both ends, and a handle on its +X side above the middle. Not a solid
+    /// of revolution, and its surface spreads most along the handle.
+    fn mug() -> Mesh {
+        let mut mesh = (Vec::new(), Vec::new());
+        let (r, h) = (0.04f32, 0.095f32);
+        tube(
+            |t| Vec3::new(0.0, h * t, 0.0),
+            |_| (Vec3::Z, Vec3::X),
+            r,
+            (24, 64),
+            &mut mesh,
+        );
+        // The ends: a fan from each centre to the body's first and last ring.
+        for (centre, ring) in [(Vec3::ZERO, 0u32), (Vec3::new(0.0, h, 0.0), 24 * 64)] {
+            let c = mesh.0.len() as u32;
+            mesh.0.push(centre);
+            for l in 0..64u32 {
+                let (a, b) = (ring + l, ring + (l + 1) % 64);
+                mesh.1.push(if ring == 0 { [c, b, a] } else { [c, a, b] });
+            }
+        }
+        let arc = |t: f32| std::f32::consts::PI * (t - 0.5);
+        tube(
+            |t| Vec3::new(r - 0.004 + 0.026 * arc(t).cos(), 0.6 * h + 0.026 * arc(t).sin(), 0.0),
+            |t| (Vec3::new(arc(t).cos(), arc(t).sin(), 0.0), Vec3::Z),
+            0.0075,
+            (32, 16),
+            &mut mesh,
+        );
+        let (positions, triangles) = mesh;
+        let n = positions.len();
+        Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles)
+    }
+
+    #[test]
+    fn a_mug_s_axis_is_its_body_s_not_the_direction_its_handle_spreads_it() {
+        let mug = mug();
+        let axis = axis_of_revolution(&mug).expect("the body's axis");
+        assert!(axis.y.abs() > 0.5f64.to_radians().cos(), "axis {axis}");
+        // The surface's spread alone would take another direction for it.
+        let spread = axis_of_spread(&mug).expect("a direction stands out");
+        assert!(spread.y.abs() < 0.5, "spread {spread}");
+        assert_eq!(axis_to_y(&mug), Quat::IDENTITY);
+        let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
+        let built = mug.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
+        let axis = axis_to_y(&built) * (turn * Vec3::Y);
+        assert!(axis.y.abs() > 0.9999, "the body's axis goes to {axis}");
+    }
+
+    #[test]
+    fn a_sphere_and_a_box_have_no_axis_of_revolution() {
+        let sphere = render::procedural::UvSphere::default().build().mesh;
+        assert_eq!(axis_of_revolution(&sphere), None);
+        // A box 3 x 2 x 1, each face in 8 x 8 squares (a scan's facets, not
+        // a few large ones that some line meets by chance): a direction of
+        // spread stands out, but no surface of revolution.
+        let half = Vec3::new(1.5, 1.0, 0.5);
+        let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+        for axis in 0..3 {
+            for side in [-1.0f32, 1.0] {
+                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                let first = positions.len() as u32;
+                for i in 0..=8 {
+                    for j in 0..=8 {
+                        let mut p = Vec3::ZERO;
+                        p[axis] = side * half[axis];
+                        p[u] = half[u] * (i as f32 / 4.0 - 1.0);
+                        p[v] = half[v] * (j as f32 / 4.0 - 1.0);
+                        positions.push(p);
+                    }
+                }
+                let at = |i: u32, j: u32| first + i * 9 + j;
+                for i in 0..8 {
+                    for j in 0..8 {
+                        let quad = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                        triangles.push([quad[0], quad[1], quad[2]]);
+                        triangles.push([quad[0], quad[2], quad[3]]);
+                    }
+                }
+            }
+        }
+        let n = positions.len();
+        let cuboid = Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles);
+        assert_eq!(axis_of_revolution(&cuboid), None);
+        let spread = axis_of_spread(&cuboid).expect("a side that stands out");
+        assert!(spread.abs().max_element() > 0.999, "spread {spread}");
     }
 
     /// A 160x120 camera 0.45 m in front of the origin at `height`, looking
