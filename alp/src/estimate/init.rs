@@ -32,6 +32,11 @@ const ON_AXIS: f64 = 0.05;
 /// times; a sphere, 1.1).
 const SECOND_AXIS_RATIO: f64 = 20.0;
 
+/// A surface this much of revolution about its axis (by area) shows one
+/// outline at every turn about it (the suite's can, cap and ring: all of
+/// it; a mug with a handle: 0.90).
+const WHOLLY_REVOLVED: f64 = 0.98;
+
 /// Fits of the axis of revolution, each weighing the facets by how far the
 /// one before left their normal lines from it.
 const REWEIGHTINGS: usize = 8;
@@ -52,7 +57,8 @@ const REVOLVED_SHARE: f64 = 0.6;
 /// directions, the one nearer +Y, or with its largest component positive,
 /// goes to +Y.
 pub fn axis_to_y(mesh: &Mesh) -> Quat {
-    let Some(axis) = axis_of_revolution(mesh).or_else(|| axis_of_spread(mesh)) else {
+    let revolved = axis_of_revolution(mesh).map(|revolution| revolution.axis);
+    let Some(axis) = revolved.or_else(|| axis_of_spread(mesh)) else {
         return Quat::IDENTITY;
     };
     if axis.y.abs() >= AXIS_IS_Y_DEG.to_radians().cos() {
@@ -95,7 +101,7 @@ fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
 /// of revolution). Least squares over the facets' areas gives `m` for
 /// each `a`, and `a` as the least eigenvector of what is left; facets off
 /// the axis (a handle) are then weighed down and the fit repeated.
-pub fn axis_of_revolution(mesh: &Mesh) -> Option<DVec3> {
+pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
     let facets = facets(mesh);
     let area: f64 = facets.iter().map(|f| f.2).sum();
     let centroid = facets.iter().map(|(p, _, w)| *p * *w).sum::<DVec3>() / area.max(1e-300);
@@ -151,9 +157,32 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<DVec3> {
         // A second line that fits about as well: all normal lines pass
         // through one point (a sphere), and every line through it is an axis.
         let single = values[order[1]] >= SECOND_AXIS_RATIO * values[order[0]].max(1e-12);
-        found = (single && revolved >= REVOLVED_SHARE * area).then_some(axis);
+        found = (single && revolved >= REVOLVED_SHARE * area).then_some(Revolution {
+            axis,
+            share: revolved / area,
+        });
     }
     found
+}
+
+/// A probe's axis of revolution and the share of its surface's area that
+/// is of revolution about it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Revolution {
+    /// The axis's unit direction.
+    pub axis: DVec3,
+    /// The share of the area whose normal lines meet the axis (within [`ON_AXIS`]).
+    pub share: f64,
+}
+
+/// Whether turning the probe about its axis changes its outline: a surface
+/// not wholly of revolution (a mug's handle; a box), though not a sphere,
+/// of revolution about every line through its centre.
+pub fn turns_show(mesh: &Mesh) -> bool {
+    match axis_of_revolution(mesh) {
+        Some(revolution) => revolution.share < WHOLLY_REVOLVED,
+        None => axis_of_spread(mesh).is_some(),
+    }
 }
 
 /// The principal direction of the surface's spread that stands out from
@@ -694,12 +723,20 @@ mod tests {
     #[test]
     fn a_mug_s_axis_is_its_body_s_not_the_direction_its_handle_spreads_it() {
         let mug = mug();
-        let axis = axis_of_revolution(&mug).expect("the body's axis");
+        let axis = axis_of_revolution(&mug).expect("the body's axis").axis;
         assert!(axis.y.abs() > 0.5f64.to_radians().cos(), "axis {axis}");
         // The surface's spread alone would take another direction for it.
         let spread = axis_of_spread(&mug).expect("a direction stands out");
         assert!(spread.y.abs() < 0.5, "spread {spread}");
         assert_eq!(axis_to_y(&mug), Quat::IDENTITY);
+        // Its handle shows how it is turned; a can and a cap show nothing.
+        assert!(turns_show(&mug));
+        for probe in [
+            SodaCan::default().build(),
+            render::procedural::ThermosCap::default().build(),
+        ] {
+            assert!(!turns_show(&probe.mesh));
+        }
         let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
         let built = mug.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
         let axis = axis_to_y(&built) * (turn * Vec3::Y);
@@ -710,6 +747,7 @@ mod tests {
     fn a_sphere_and_a_box_have_no_axis_of_revolution() {
         let sphere = render::procedural::UvSphere::default().build().mesh;
         assert_eq!(axis_of_revolution(&sphere), None);
+        assert!(!turns_show(&sphere), "a sphere turned shows its outline");
         // A box 3 x 2 x 1, each face in 8 x 8 squares (a scan's facets, not
         // a few large ones that some line meets by chance): a direction of
         // spread stands out, but no surface of revolution.
@@ -741,6 +779,7 @@ mod tests {
         let n = positions.len();
         let cuboid = Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles);
         assert_eq!(axis_of_revolution(&cuboid), None);
+        assert!(turns_show(&cuboid));
         let spread = axis_of_spread(&cuboid).expect("a side that stands out");
         assert!(spread.abs().max_element() > 0.999, "spread {spread}");
     }

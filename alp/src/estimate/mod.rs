@@ -1065,6 +1065,9 @@ struct Probe<'a> {
     edges: EdgeAdjacency,
     /// Whether mesh +Y is the probe's top (see `init::axis_hypotheses`).
     top_known: bool,
+    /// Whether a turn about its axis changes its outline (`init::turns_show`):
+    /// each axis hypothesis is then fitted at [`AXIS_FIT_TURNS_DEG`].
+    turns_show: bool,
 }
 
 /// The lighting at `pose`: primary hits, the light transport onto a
@@ -1805,6 +1808,10 @@ fn best_ranked(starts: &[StartReport], among: impl IntoIterator<Item = usize>, s
 /// standing one, not always which end is up.
 const AXIS_KEEP_RATIO: f64 = 1.5;
 
+/// The turns (degrees, about the axis) at which each axis hypothesis of a
+/// probe whose outline a turn changes is fitted.
+const AXIS_FIT_TURNS_DEG: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
+
 /// Fitted axes closer than this (degrees) are the same: the worse one goes.
 const SAME_FITTED_AXIS_DEG: f32 = 5.0;
 
@@ -1856,14 +1863,27 @@ fn search_pose(
     let mesh = &probe.asset.mesh;
     let shape = init::MaskShape::new(&photo.mask)?;
     let hypotheses = init::axis_hypotheses(&photo.camera, &shape, mesh, probe.top_known);
-    phases.expect_more(hypotheses.len() - 1);
+    // A probe whose outline a turn changes (a mug's handle) fits each axis
+    // at several turns, the best kept: a fit from one turn pulls the axis
+    // after a handle where the photo shows none.
+    let turns: &[f32] = match probe.turns_show {
+        true => &AXIS_FIT_TURNS_DEG,
+        false => &[0.0],
+    };
+    phases.expect_more(hypotheses.len() * turns.len() - 1);
     // Hypotheses and starts are independent and each one's small pose tapes
     // keep about one core busy: they run side by side (results do not
     // depend on the thread count; reports keep their order).
     let fitted: Vec<Result<_>> = hypotheses
         .par_iter()
-        .map(|&axis| {
+        .flat_map_iter(|&axis| turns.iter().map(move |&turn| (axis, turn)))
+        .map(|(axis, turn)| {
             let start = init::initial_pose(mesh, &photo.camera, &shape, axis);
+            // (Unturned, the start is the one a probe of revolution has.)
+            let start = match turn == 0.0 {
+                true => start,
+                false => init::turned(&start, mesh, turn),
+            };
             let progress = 0.0..SILHOUETTE_PROGRESS;
             fit_silhouette(
                 &ctx,
@@ -1877,9 +1897,17 @@ fn search_pose(
         .collect();
     let mut axes = Vec::new();
     let mut axis_poses = Vec::new();
-    for (result, axis) in fitted.into_iter().zip(&hypotheses) {
-        let (pose, loss, report) = result?;
-        phases.push(report);
+    let mut fitted = fitted.into_iter();
+    for axis in &hypotheses {
+        let mut best: Option<(Pose, f64)> = None;
+        for _ in turns {
+            let (pose, loss, report) = fitted.next().expect("a fit per axis and turn")?;
+            phases.push(report);
+            if best.is_none_or(|(_, least)| loss < least) {
+                best = Some((pose, loss));
+            }
+        }
+        let (pose, loss) = best.expect("at least one turn");
         axes.push(AxisReport {
             axis: axis.to_array(),
             fitted_axis: (pose.rotation * Vec3::Y).to_array(),
@@ -2463,6 +2491,7 @@ pub fn estimate_with_progress(
         asset,
         edges: EdgeAdjacency::new(&asset.mesh),
         top_known: built_along_y,
+        turns_show: init::turns_show(&asset.mesh),
     };
     // The photo as the estimate works on it (box-filtered when its mask
     // holds more pixels than `working_mask_pixels`).
@@ -2831,6 +2860,7 @@ mod tests {
             asset,
             edges: EdgeAdjacency::new(&asset.mesh),
             top_known: true,
+            turns_show: false,
         }
     }
 
