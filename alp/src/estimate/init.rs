@@ -48,8 +48,8 @@ const REVOLVED_SHARE: f64 = 0.6;
 /// The rotation that turns the probe's axis to mesh +Y: the estimate turns
 /// the probe about +Y (its yaw starts) and reads its length along it. The
 /// axis is the probe's axis of revolution ([`axis_of_revolution`]: a mug's
-/// body's, whose handle the spread of the surface would take for the
-/// axis), else the principal direction of the surface's spread
+/// body's, where the spread of its surface picks the direction across its
+/// handle), else the principal direction of the surface's spread
 /// (area-weighted second moments) whose spread stands out from the other
 /// two: the longest for a probe longer than wide, the shortest for one
 /// wider than long. Identity when the axis is already +Y (to
@@ -91,9 +91,10 @@ fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
         .collect()
 }
 
-/// The unit direction of the line about which at least [`REVOLVED_SHARE`]
-/// of the surface is of revolution, if there is one line only (a sphere,
-/// of revolution about every line through its centre, has none). Every
+/// The line about which at least [`REVOLVED_SHARE`] of the surface is of
+/// revolution, if there is one line only (a sphere, of revolution about
+/// every line through its centre, has none): its direction and that share.
+/// Every
 /// normal line of a surface of revolution meets its axis (or runs parallel
 /// to it): with the axis's direction `a` and moment `m = c x a` (`c` a
 /// point on it), each facet's `(p x n) . a + n . m` is 0 (`p` its centroid,
@@ -687,7 +688,7 @@ mod tests {
 
     /// A mug built along +Y: a body 80 mm across and 95 mm tall, closed at
     /// both ends, and a handle on its +X side above the middle. Not a solid
-    /// of revolution, and its surface spreads most along the handle.
+    /// of revolution, and the spread of its surface picks another direction.
     fn mug() -> Mesh {
         let mut mesh = (Vec::new(), Vec::new());
         let (r, h) = (0.04f32, 0.095f32);
