@@ -1780,11 +1780,13 @@ fn rival_starts(starts: &[StartReport], candidates: &[Pose], chosen: usize) -> V
 /// of them when none does): a probe's turns show one outline when it is of
 /// revolution, and the kept axes fit within that ratio; a mug's handle
 /// shows its turn in the outline, which a coarse map's colours can
-/// contradict (a plain steel mug, upright in the studio: its true turn's
-/// outline fit 8 times better than the upside-down turn colour ranked
-/// first). On 12 photos of a steel mug, plain or banded, 0 then 2 poses
-/// found, errors 11.60 / 7.35 / 9.09 -> 8.43 / 4.13 / 4.61 deg; the
-/// suite's maps are the same, byte for byte.
+/// contradict (a plain steel mug with its handle at mid-height, upright in
+/// the studio: its true turn's outline fit 8 times better than the
+/// upside-down turn colour ranked first). On 12 photos of a steel mug with
+/// its handle above the middle, plain or banded, with the axis of
+/// revolution and one fit per axis: 0 then 2 poses found, errors 11.60 /
+/// 7.35 / 9.09 -> 8.43 / 4.13 / 4.61 deg; the suite's maps are the same,
+/// byte for byte.
 fn best_ranked(starts: &[StartReport], among: impl IntoIterator<Item = usize>, symmetric: bool) -> Option<usize> {
     let among: Vec<usize> = among.into_iter().collect();
     let least = starts.iter().map(|s| s.silhouette_loss).fold(f64::INFINITY, f64::min);
