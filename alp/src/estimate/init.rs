@@ -80,13 +80,12 @@ pub fn axis_to_y(mesh: &Mesh) -> Quat {
 /// The facets of `mesh`: centroid, unit normal and area (degenerate ones
 /// left out).
 fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
-    mesh.triangles
-        .iter()
-        .filter_map(|tri| {
-            let [a, b, c] = tri.map(|i| mesh.positions[i as usize].as_dvec3());
-            let cross = (b - a).cross(c - a);
-            let area = 0.5 * cross.length();
-            (area > 0.0).then(|| ((a + b + c) / 3.0, cross / (2.0 * area), area))
+    (0..mesh.triangles.len())
+        .filter_map(|t| {
+            let [a, b, c] = mesh.corners(t).map(|p| p.as_dvec3());
+            let twice_area = mesh.face_normal(t).as_dvec3();
+            let area = 0.5 * twice_area.length();
+            (area > 0.0).then(|| ((a + b + c) / 3.0, twice_area / (2.0 * area), area))
         })
         .collect()
 }

@@ -1878,14 +1878,15 @@ fn search_pose(
     // depend on the thread count; reports keep their order).
     let fitted: Vec<Result<_>> = hypotheses
         .par_iter()
-        .flat_map_iter(|&axis| turns.iter().map(move |&turn| (axis, turn)))
-        .map(|(axis, turn)| {
+        .flat_map_iter(|&axis| {
             let start = init::initial_pose(mesh, &photo.camera, &shape, axis);
             // (Unturned, the start is the one a probe of revolution has.)
-            let start = match turn == 0.0 {
+            turns.iter().map(move |&turn| match turn == 0.0 {
                 true => start,
                 false => init::turned(&start, mesh, turn),
-            };
+            })
+        })
+        .map(|start| {
             let progress = 0.0..SILHOUETTE_PROGRESS;
             fit_silhouette(
                 &ctx,
