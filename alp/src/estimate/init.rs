@@ -117,7 +117,8 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
     // Centred and in units of the size: the residual is then a distance in sizes.
     let lines: Vec<(DVec3, DVec3)> = facets.iter().map(|(p, n, _)| ((*p - centroid) / size, *n)).collect();
     let mut weight: Vec<f64> = facets.iter().map(|f| f.2 / area).collect();
-    let mut found = None;
+    // The last fit's axis, residuals and whether a second line fits about as well.
+    let mut last = None;
     for _ in 0..REWEIGHTINGS {
         let outer = |u: DVec3, v: DVec3| DMat3::from_cols(u * v.x, u * v.y, u * v.z);
         let (mut nn, mut mn, mut mm) = (DMat3::ZERO, DMat3::ZERO, DMat3::ZERO);
@@ -148,21 +149,22 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
             .zip(&residual)
             .map(|(f, r)| f.2 / area / (1.0 + (r / ON_AXIS).powi(2)))
             .collect();
-        let revolved: f64 = facets
-            .iter()
-            .zip(&residual)
-            .filter(|(_, r)| **r <= ON_AXIS)
-            .map(|(f, _)| f.2)
-            .sum();
         // A second line that fits about as well: all normal lines pass
         // through one point (a sphere), and every line through it is an axis.
         let single = values[order[1]] >= SECOND_AXIS_RATIO * values[order[0]].max(1e-12);
-        found = (single && revolved >= REVOLVED_SHARE * area).then_some(Revolution {
-            axis,
-            share: revolved / area,
-        });
+        last = Some((axis, residual, single));
     }
-    found
+    let (axis, residual, single) = last?;
+    let revolved: f64 = facets
+        .iter()
+        .zip(&residual)
+        .filter(|(_, r)| **r <= ON_AXIS)
+        .map(|(f, _)| f.2)
+        .sum();
+    (single && revolved >= REVOLVED_SHARE * area).then_some(Revolution {
+        axis,
+        share: revolved / area,
+    })
 }
 
 /// A probe's axis of revolution and the share of its surface's area that
@@ -189,8 +191,8 @@ pub fn turns_show(mesh: &Mesh) -> bool {
 /// the other two, if one does (see [`axis_to_y`]).
 fn axis_of_spread(mesh: &Mesh) -> Option<DVec3> {
     let (mut area, mut first, mut second) = (0.0f64, [0.0f64; 3], [[0.0f64; 3]; 3]);
-    for tri in &mesh.triangles {
-        let [a, b, c] = tri.map(|i| mesh.positions[i as usize].as_dvec3());
+    for t in 0..mesh.triangles.len() {
+        let [a, b, c] = mesh.corners(t).map(|p| p.as_dvec3());
         let da = 0.5 * (b - a).cross(c - a).length();
         let sum = a + b + c;
         area += da;
