@@ -593,8 +593,7 @@ impl<T: Real> Graph<T> {
             }
             let start = ex.group_members.len();
             ex.group_members.push(j as u32);
-            for k in j + 1..n {
-                let ins = &ex.instrs[i0 + k];
+            for (k, ins) in ex.instrs[i0..].iter().enumerate().skip(j + 1) {
                 if ex.group_members.len() - start == GATHER_GROUP {
                     break;
                 }
