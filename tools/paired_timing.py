@@ -20,6 +20,7 @@ the same file name need separate folders (their outputs go to OUT/NAME).
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -33,7 +34,7 @@ def run(binary, scene_dir, out, known):
            "--probe", probe, "--out", out, "--quality", "default", "--threads", "2", "--seed", "0"]
     if known:
         cmd += ["--pose", "pose.json"]
-    subprocess.run(["rm", "-rf", out], check=True)
+    shutil.rmtree(out, ignore_errors=True)
     os.makedirs(os.path.dirname(out), exist_ok=True)
     t0 = time.perf_counter()
     done = subprocess.run(cmd, cwd=scene_dir, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

@@ -86,16 +86,17 @@ struct Instr {
     node: u32,
     ins: [Src; 3],
     out: Out,
-    /// A gather's group in `Executor::group_members`, for a full forward
-    /// pass and for a recompute ([`GatherGroup::NONE`] elsewhere).
+    /// A gather's group in its region's part of `Executor::group_members`,
+    /// for a full forward pass and for a recompute ([`GatherGroup::NONE`]
+    /// elsewhere).
     groups: [GatherGroup; 2],
 }
 
 /// The gathers that run in one loop with a lead gather: the later gathers
 /// of its region that read the same array at the same indices (the
 /// channels of a texel), the lead first. Found once when the region is
-/// built: searched in every tile, they cost the sampling of a lighting fit
-/// an eighth of its time.
+/// built: searched in every tile, the search took 5.6 % of `alp estimate`'s
+/// time on the upright courtyard can's twin at its true pose (perf).
 #[derive(Clone, Copy, Debug)]
 struct GatherGroup {
     start: u32,
@@ -558,7 +559,7 @@ impl<T: Real> Graph<T> {
         }
         let g0 = self.exec.group_members.len();
         for recompute in [false, true] {
-            self.group_gathers(i0, recompute);
+            self.group_gathers(i0, g0, recompute);
         }
         for &a in &self.exec.arrays[a0..] {
             self.exec.local[a as usize] = NONE;
@@ -574,9 +575,9 @@ impl<T: Real> Graph<T> {
     }
 
     /// Groups the gathers of the region whose instructions begin at `i0`
-    /// (see [`GatherGroup`]): for a recompute, only those whose values
-    /// live in slots.
-    fn group_gathers(&mut self, i0: usize, recompute: bool) {
+    /// and whose groups at `g0` (see [`GatherGroup`]): for a recompute,
+    /// only those whose values live in slots.
+    fn group_gathers(&mut self, i0: usize, g0: usize, recompute: bool) {
         let nodes = &self.nodes;
         let ex = &mut self.exec;
         let eligible = |ins: &Instr| {
@@ -603,7 +604,7 @@ impl<T: Real> Graph<T> {
                 }
             }
             ex.instrs[i0 + j].groups[recompute as usize] = GatherGroup {
-                start: start as u32,
+                start: (start - g0) as u32,
                 len: (ex.group_members.len() - start) as u32,
             };
         }
@@ -922,7 +923,7 @@ impl<T: Real> Graph<T> {
             nodes: &self.nodes,
             edges: &self.edges,
             instrs: &ex.instrs[reg.instrs.clone()],
-            group_members: &ex.group_members,
+            group_members: &ex.group_members[reg.group_members.clone()],
             shared: &ex.shared[reg.shared.clone()],
             vals: &ex.vals,
             adjs: &ex.adjs,
@@ -1043,7 +1044,7 @@ struct Ctx<'a, T: Real> {
     nodes: &'a [Node<T>],
     edges: &'a [u32],
     instrs: &'a [Instr],
-    /// Every region's gather groups ([`Instr::groups`] index them).
+    /// The region's gather groups ([`Instr::groups`] index them).
     group_members: &'a [u32],
     shared: &'a [(u32, bool)],
     vals: &'a [Ptr<T>],
