@@ -16,6 +16,7 @@
 use std::fmt;
 
 use crate::objective::all_finite;
+use crate::vector::sum_by_lanes;
 use crate::{Bounds, Objective, OptimError};
 
 /// Why a line search found no acceptable step.
@@ -72,6 +73,9 @@ const STEP_MAX: f64 = 1e10;
 const SHRINK: f64 = 0.66;
 /// Extrapolation range, as multiples of the last step, before a minimizer is bracketed.
 const EXTRAPOLATE: (f64, f64) = (1.1, 4.0);
+/// A change of the value this small, relative to it, may be rounding: a sum of
+/// thousands of terms (pixels, texels) is no more exact than this.
+const ROUNDING: f64 = 1e-12;
 
 /// A point of the search: parameters, gradient and value.
 #[derive(Debug, Clone)]
@@ -187,7 +191,13 @@ impl MoreThuente {
             };
             let decrease_test = line.value + step * slope_test;
 
-            if finite && value <= decrease_test && slope.abs() <= self.c2 * -line.slope {
+            // Near a minimizer rounding hides the decrease in the value that the
+            // slope still shows: there a value within rounding of phi(0) passes
+            // (Hager and Zhang's approximate Wolfe conditions, whose slope test
+            // the strong curvature test implies for c2 < 1 - 2 c1).
+            let rounding = line.value + ROUNDING * line.value.abs();
+            let curved = slope.abs() <= self.c2 * -line.slope;
+            if finite && curved && (value <= decrease_test || value <= rounding) {
                 std::mem::swap(trial, best);
                 out.step = Ok(step);
                 return out;
@@ -265,15 +275,11 @@ fn evaluate<O: Objective>(objective: &mut O, bounds: &Bounds, line: &Line<'_>, s
 /// Right derivative of `phi` at the trial: coordinates pinned at a bound by the
 /// projection stop moving, so they drop out of `grad . d`.
 fn path_slope(bounds: &Bounds, direction: &[f64], trial: &Point) -> f64 {
-    let mut slope = 0.0;
-    for (i, (&d, &g)) in direction.iter().zip(&trial.grad).enumerate() {
-        let x = trial.x[i];
+    sum_by_lanes(direction.len(), |i| {
+        let (x, d) = (trial.x[i], direction[i]);
         let pinned = (x <= bounds.lower()[i] && d < 0.0) || (x >= bounds.upper()[i] && d > 0.0);
-        if !pinned {
-            slope += g * d;
-        }
-    }
-    slope
+        if pinned { 0.0 } else { trial.grad[i] * d }
+    })
 }
 
 /// One `dcstep`: the next trial from a cubic or quadratic fit, and the updated bracket.
