@@ -191,13 +191,14 @@ impl MoreThuente {
             };
             let decrease_test = line.value + step * slope_test;
 
-            // Near a minimizer rounding hides the decrease in the value that the
-            // slope still shows: there a value within rounding of phi(0) passes
-            // (Hager and Zhang's approximate Wolfe conditions, whose slope test
-            // the strong curvature test implies for c2 < 1 - 2 c1).
-            let rounding = line.value + ROUNDING * line.value.abs();
             let curved = slope.abs() <= self.c2 * -line.slope;
-            if finite && curved && (value <= decrease_test || value <= rounding) {
+            // Near a minimizer rounding hides the decrease in the value that the
+            // slope still shows: there a value within rounding of phi(0) passes if
+            // the slope has fallen to (1 - 2 c1) |phi'(0)| (Hager and Zhang's
+            // approximate Wolfe conditions: on a quadratic, the decrease test).
+            let rounding = line.value + ROUNDING * line.value.abs();
+            let approximate = value <= rounding && slope <= (1.0 - 2.0 * self.c1) * -line.slope;
+            if finite && curved && (value <= decrease_test || approximate) {
                 std::mem::swap(trial, best);
                 out.step = Ok(step);
                 return out;
@@ -465,6 +466,26 @@ mod tests {
         assert!(out.rejected >= 1);
         let step = out.step.unwrap();
         assert!(step <= 1.0 && best.value < 0.25, "step {step}, value {}", best.value);
+    }
+
+    #[test]
+    fn takes_a_step_that_only_the_slope_shows_where_rounding_flattens_the_value() {
+        // A quadratic (a - 1)^2 / 2 seen at 1e8 + itself: its values round to
+        // multiples of 1.5e-8 and show no decrease, its slope a - 1 is exact.
+        let f = |x: &[f64], g: &mut [f64]| {
+            g[0] = x[0] - 1.0;
+            1e8 + 0.5 * (x[0] - 1.0).powi(2) * 1e-9
+        };
+        let (out, best) = search_1d(f, 1.0);
+        assert_eq!(out.step, Ok(1.0));
+        assert_eq!(best.grad[0], 0.0);
+        // A value above phi(0) by more than rounding does not pass on its slope.
+        let f = |x: &[f64], g: &mut [f64]| {
+            g[0] = x[0] - 1.0;
+            x[0] * 1e-3
+        };
+        let (out, _) = search_1d(f, 1.0);
+        assert!(out.step.is_err(), "{:?}", out.step);
     }
 
     #[test]
