@@ -25,7 +25,6 @@
 
 use crate::linesearch::{Line, Point};
 use crate::solver::Stopping;
-use crate::vector::{axpy, dot, norm, sum_by_lanes};
 use crate::{Bounds, MoreThuente, Objective, OptimError, Solver, State, Termination};
 
 /// Builder for [`Lbfgs`]; every setting has a default (SciPy's where it has one).
@@ -143,6 +142,7 @@ impl Lbfgs {
             };
         }
         self.memory.apply_inverse_hessian(d);
+        let mut slope = 0.0;
         for (i, di) in d.iter_mut().enumerate() {
             let (x, lo, hi) = (state.x[i], self.bounds.lower()[i], self.bounds.upper()[i]);
             // Active variables stay frozen; free ones on a bound that `H` would push
@@ -151,8 +151,9 @@ impl Lbfgs {
             if frozen {
                 *di = 0.0;
             }
+            slope += *di * state.grad[i];
         }
-        dot(d, &state.grad)
+        slope
     }
 }
 
@@ -289,8 +290,12 @@ impl Memory {
 
     /// Stores `s = x_new - x`, `y = g_new - g` unless `s.y <= eps y.y` (no positive curvature).
     fn push(&mut self, x_new: &[f64], x: &[f64], g_new: &[f64], g: &[f64]) {
-        let sy = sum_by_lanes(self.n, |i| (x_new[i] - x[i]) * (g_new[i] - g[i]));
-        let yy = sum_by_lanes(self.n, |i| (g_new[i] - g[i]).powi(2));
+        let (mut sy, mut yy) = (0.0, 0.0);
+        for i in 0..self.n {
+            let (s, y) = (x_new[i] - x[i], g_new[i] - g[i]);
+            sy += s * y;
+            yy += y * y;
+        }
         let curved = sy > f64::EPSILON * yy;
         if !curved {
             return;
@@ -337,6 +342,19 @@ impl Memory {
             axpy(self.alpha[slot] - b, s, q);
         }
     }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// `y += a x`.
+fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
+    y.iter_mut().zip(x).for_each(|(yi, xi)| *yi += a * xi);
+}
+
+fn norm(v: &[f64]) -> f64 {
+    dot(v, v).sqrt()
 }
 
 #[cfg(test)]

@@ -50,7 +50,6 @@ pub mod problems;
 pub mod schedule;
 mod solver;
 mod state;
-mod vector;
 
 pub use adam::{Adam, AdamBuilder, GradClip, ParamGroup, Plateau};
 pub use bounds::Bounds;

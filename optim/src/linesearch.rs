@@ -16,7 +16,6 @@
 use std::fmt;
 
 use crate::objective::all_finite;
-use crate::vector::sum_by_lanes;
 use crate::{Bounds, Objective, OptimError};
 
 /// Why a line search found no acceptable step.
@@ -276,11 +275,15 @@ fn evaluate<O: Objective>(objective: &mut O, bounds: &Bounds, line: &Line<'_>, s
 /// Right derivative of `phi` at the trial: coordinates pinned at a bound by the
 /// projection stop moving, so they drop out of `grad . d`.
 fn path_slope(bounds: &Bounds, direction: &[f64], trial: &Point) -> f64 {
-    sum_by_lanes(direction.len(), |i| {
-        let (x, d) = (trial.x[i], direction[i]);
+    let mut slope = 0.0;
+    for (i, (&d, &g)) in direction.iter().zip(&trial.grad).enumerate() {
+        let x = trial.x[i];
         let pinned = (x <= bounds.lower()[i] && d < 0.0) || (x >= bounds.upper()[i] && d > 0.0);
-        if pinned { 0.0 } else { trial.grad[i] * d }
-    })
+        if !pinned {
+            slope += g * d;
+        }
+    }
+    slope
 }
 
 /// One `dcstep`: the next trial from a cubic or quadratic fit, and the updated bracket.
@@ -469,12 +472,13 @@ mod tests {
     }
 
     #[test]
-    fn takes_a_step_that_only_the_slope_shows_where_rounding_flattens_the_value() {
-        // A quadratic (a - 1)^2 / 2 seen at 1e8 + itself: its values round to
-        // multiples of 1.5e-8 and show no decrease, its slope a - 1 is exact.
+    fn takes_a_step_that_only_the_slope_shows_where_rounding_hides_the_decrease() {
+        // phi(a) = 1e8 + 1e-9 (a - 1)^2 / 2 with an error in the value that grows to
+        // 1e-7 at a = 1 (1e-15 of the value, as rounding might leave): the error hides
+        // the decrease (5e-10), the exact slope shows it.
         let f = |x: &[f64], g: &mut [f64]| {
-            g[0] = x[0] - 1.0;
-            1e8 + 0.5 * (x[0] - 1.0).powi(2) * 1e-9
+            g[0] = 1e-9 * (x[0] - 1.0);
+            1e8 + 0.5e-9 * (x[0] - 1.0).powi(2) + 1e-7 * x[0]
         };
         let (out, best) = search_1d(f, 1.0);
         assert_eq!(out.step, Ok(1.0));
