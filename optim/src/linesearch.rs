@@ -483,10 +483,10 @@ mod tests {
         let (out, best) = search_1d(f, 1.0);
         assert_eq!(out.step, Ok(1.0));
         assert_eq!(best.grad[0], 0.0);
-        // A value above phi(0) by more than rounding does not pass on its slope.
+        // A value above phi(0) by more than rounding (1e-9 of it) does not pass on its slope.
         let f = |x: &[f64], g: &mut [f64]| {
             g[0] = x[0] - 1.0;
-            x[0] * 1e-3
+            1.0 + 1e-9 * x[0]
         };
         let (out, _) = search_1d(f, 1.0);
         assert!(out.step.is_err(), "{:?}", out.step);
