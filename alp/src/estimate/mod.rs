@@ -1170,27 +1170,16 @@ fn fit_lighting(
         let tp = samples.throughput.map(|t| tape.to_vec(t));
         let pass_lit = tape.to_vec(samples.lit);
         let pass_segment = tape.to_vec(samples.segment);
-        // The samples of the first pass's pixels, with their data rows.
-        let kept: Vec<(usize, u32)> = pass_segment
-            .iter()
-            .enumerate()
-            .filter_map(|(i, &seg)| {
-                let r = row[hits.pixels[seg as usize] as usize];
-                (r != u32::MAX).then_some((i, r))
-            })
-            .collect();
-        // Their directions' atan2 and acos in parallel: in one loop with the
-        // rest, the final phase spent 0.1 s of each pass on one core.
-        uv.par_extend(
-            kept.par_iter()
-                .map(|&(i, _)| direction_to_uv(Vec3::new(d[0][i], d[1][i], d[2][i]))),
-        );
-        for &(i, r) in &kept {
-            segment.push(r);
-            throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
-            direct.push(i < samples.direct);
-            lit.push(pass_lit[i] > 0.5);
-            env_sampled.push(samples.env_sampled[i]);
+        for (i, &seg) in pass_segment.iter().enumerate() {
+            let r = row[hits.pixels[seg as usize] as usize];
+            if r != u32::MAX {
+                segment.push(r);
+                uv.push(direction_to_uv(Vec3::new(d[0][i], d[1][i], d[2][i])));
+                throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
+                direct.push(i < samples.direct);
+                lit.push(pass_lit[i] > 0.5);
+                env_sampled.push(samples.env_sampled[i]);
+            }
         }
         if pass == 0 {
             reference = Some(hits);
