@@ -4,11 +4,14 @@
 //! points (upright, along the mask's principal direction, end-on); turns
 //! about the axis (yaws) make the orientation starts.
 
+use std::collections::BTreeMap;
+
 use glam::{DMat3, DVec3, Mat3, Quat, Vec2, Vec3};
 use render::camera::Camera;
 use render::image_io::Mask;
 use render::mesh::Mesh;
 use render::pose::Pose;
+use render::probe::ProbeAsset;
 use render::{RenderError, Result};
 
 /// Eigenvalues of the surface's spread closer than this factor are equal:
@@ -152,9 +155,9 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
         // A second line that fits about as well: all normal lines pass
         // through one point (a sphere), and every line through it is an axis.
         let single = values[order[1]] >= SECOND_AXIS_RATIO * values[order[0]].max(1e-12);
-        last = Some((axis, residual, single));
+        last = Some((axis, moment, residual, single));
     }
-    let (axis, residual, single) = last?;
+    let (axis, moment, residual, single) = last?;
     let revolved: f64 = facets
         .iter()
         .zip(&residual)
@@ -163,6 +166,8 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
         .sum();
     (single && revolved >= REVOLVED_SHARE * area).then_some(Revolution {
         axis,
+        // The point of the line nearest the centroid, back in mesh units.
+        point: centroid + axis.cross(moment) * size,
         share: revolved / area,
     })
 }
@@ -173,6 +178,8 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
 pub struct Revolution {
     /// The axis's unit direction.
     pub axis: DVec3,
+    /// A point on the axis.
+    pub point: DVec3,
     /// The share of the area whose normal lines meet the axis (within [`ON_AXIS`]).
     pub share: f64,
 }
@@ -186,6 +193,119 @@ pub fn turns_show(mesh: &Mesh) -> bool {
         None => axis_of_spread(mesh).is_some(),
     }
 }
+
+/// Whether the probe looks the same at every turn about its axis of
+/// revolution, decided from the asset (Some): its whole surface of
+/// revolution, and its material (albedo, roughness, visibility) the same all
+/// round each circle about the axis, as on a cap of one colour and not on a
+/// can's label. None where the asset cannot tell: no single axis (a sphere,
+/// of revolution about every line through its centre), or facets that do
+/// not sample the circles (a scan's irregular mesh). Comparing two turns'
+/// renders tells it only where the mesh's facets come back at that turn
+/// (45 deg for the suite's 64-sided caps: at 30 deg, best quality's first
+/// two turns, the facets made the renders of 7 of its 9 caps differ by
+/// more than `renders_alike` allows: relative errors up to 1.5e-3 apart
+/// against 1e-4, or RGB angles 0.034 deg against 0.02; ranked as
+/// patterned, 2 upright caps came out end for end).
+pub fn looks_alike_turned(asset: &ProbeAsset) -> Option<bool> {
+    let revolution = axis_of_revolution(&asset.mesh)?;
+    if revolution.share < WHOLLY_REVOLVED {
+        return Some(false);
+    }
+    if [&asset.albedo, &asset.roughness, &asset.visibility]
+        .iter()
+        .all(|t| t.is_constant())
+    {
+        return Some(true);
+    }
+    let mesh = &asset.mesh;
+    let extent = mesh
+        .positions
+        .iter()
+        .map(|p| (p.as_dvec3() - revolution.point).length())
+        .fold(0.0, f64::max);
+    let bin = CIRCLE_BIN * extent;
+    // Per circle about the axis (height along it and radius from it, in
+    // bins): each channel's least and greatest value, the area sampled
+    // and the samples (in key order, so that the sums do not depend on a
+    // hash's seed).
+    let mut circles: BTreeMap<(i64, i64), Circle> = BTreeMap::new();
+    let mut total = 0.0;
+    for t in 0..mesh.triangles.len() {
+        let share = 0.5 * mesh.face_normal(t).length() as f64 / CIRCLE_SAMPLES.len() as f64;
+        if share.is_nan() || share <= 0.0 {
+            continue;
+        }
+        for b in CIRCLE_SAMPLES.map(|[b1, b2]| Vec2::new(b1, b2)) {
+            let p = mesh.interpolate(&mesh.positions, t, b).as_dvec3() - revolution.point;
+            let m = asset.material(mesh.interpolate(&mesh.uvs, t, b));
+            let value = [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness, m.visibility];
+            let height = p.dot(revolution.axis);
+            let radius = (p - revolution.axis * height).length();
+            let key = ((height / bin).round() as i64, (radius / bin).round() as i64);
+            let circle = circles.entry(key).or_insert(Circle {
+                least: value,
+                greatest: value,
+                area: 0.0,
+                samples: 0,
+            });
+            for ((least, greatest), v) in circle.least.iter_mut().zip(&mut circle.greatest).zip(value) {
+                *least = least.min(v);
+                *greatest = greatest.max(v);
+            }
+            circle.area += share;
+            circle.samples += 1;
+            total += share;
+        }
+    }
+    let area_where = |keep: &dyn Fn(&Circle) -> bool| circles.values().filter(|c| keep(c)).map(|c| c.area).sum::<f64>();
+    if area_where(&|c| c.samples >= CIRCLE_MIN_SAMPLES) < 0.5 * total {
+        return None;
+    }
+    let varied = area_where(&|c| {
+        c.least
+            .iter()
+            .zip(&c.greatest)
+            .any(|(least, greatest)| greatest - least > MATERIAL_TOLERANCE)
+    });
+    Some(varied <= VARIED_SHARE * total)
+}
+
+/// The material sampled along one circle about the axis of revolution.
+struct Circle {
+    least: [f32; 5],
+    greatest: [f32; 5],
+    area: f64,
+    samples: usize,
+}
+
+/// Circles about the axis are told apart to this fraction of the probe's
+/// extent from it: points of a revolved mesh's facets that its turns map
+/// onto each other fall in one.
+const CIRCLE_BIN: f64 = 1e-3;
+
+/// Where on each facet the material is sampled (barycentric weights of
+/// corners 1 and 2): its centroid and a point towards each corner.
+const CIRCLE_SAMPLES: [[f32; 2]; 4] = [
+    [1.0 / 3.0, 1.0 / 3.0],
+    [1.0 / 6.0, 1.0 / 6.0],
+    [2.0 / 3.0, 1.0 / 6.0],
+    [1.0 / 6.0, 2.0 / 3.0],
+];
+
+/// A circle sampled this many times at least tells whether the material
+/// varies along it; the asset decides when such circles hold half its area.
+const CIRCLE_MIN_SAMPLES: usize = 4;
+
+/// A material channel that varies by more than this along a circle shows
+/// the turn (an 8-bit texture's steps are 0.004).
+const MATERIAL_TOLERANCE: f32 = 0.01;
+
+/// The material looks alike at every turn when the circles along which it
+/// varies hold at most this share of the area (the probe's own bands put a
+/// circle's samples on both sides of an edge only by rounding). The
+/// procedural cap: none of its 142 circles; the can: 33 % of its area.
+const VARIED_SHARE: f64 = 0.01;
 
 /// The principal direction of the surface's spread that stands out from
 /// the other two, if one does (see [`axis_to_y`]).
@@ -743,6 +863,39 @@ mod tests {
         let built = mug.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
         let axis = axis_to_y(&built) * (turn * Vec3::Y);
         assert!(axis.y.abs() > 0.9999, "the body's axis goes to {axis}");
+    }
+
+    #[test]
+    fn the_asset_tells_whether_a_turn_shows() {
+        let cap = render::procedural::ThermosCap::default().build();
+        // Its roughness varies along its profile only (a rougher recess).
+        assert!(!cap.roughness.is_constant());
+        assert_eq!(looks_alike_turned(&cap), Some(true));
+        // A rougher stripe down one side shows how it is turned.
+        let mut striped = cap.clone();
+        let image = &mut striped.roughness.image;
+        for row in 0..image.height {
+            for column in 0..image.width / 8 {
+                image.pixels[row * image.width + column] = [0.5; 3];
+            }
+        }
+        assert_eq!(looks_alike_turned(&striped), Some(false));
+        // So does a label, and a turned cap tells as the cap does.
+        assert_eq!(looks_alike_turned(&SodaCan::default().build()), Some(false));
+        let turned = ProbeAsset {
+            mesh: cap.mesh.posed(&Pose::new(
+                Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9),
+                1.0,
+                Vec3::new(0.2, -0.1, 0.05),
+            )),
+            ..cap.clone()
+        };
+        assert_eq!(looks_alike_turned(&turned), Some(true));
+        // A sphere has no single axis: the renders tell.
+        assert_eq!(
+            looks_alike_turned(&render::procedural::UvSphere::default().build()),
+            None
+        );
     }
 
     #[test]

@@ -1068,6 +1068,9 @@ struct Probe<'a> {
     /// Whether a turn about its axis changes its outline (`init::turns_show`):
     /// each axis hypothesis is then fitted at [`AXIS_FIT_TURNS_DEG`].
     turns_show: bool,
+    /// Whether it looks the same at every turn about its axis, where the
+    /// asset tells (`init::looks_alike_turned`; else its renders do).
+    alike_turned: Option<bool>,
 }
 
 /// The lighting at `pose`: primary hits, the light transport onto a
@@ -2024,8 +2027,9 @@ fn search_pose(
     let mut starts = Vec::new();
     let mut candidates = Vec::new();
     // A probe symmetric about its axis (a cap of one colour) renders alike
-    // at every turn: two turns of the first axis tell, and then one turn
-    // per axis is all there is to rank, and no yaw to refine.
+    // at every turn: its asset tells, or else two turns of the first axis
+    // do, and then one turn per axis is all there is to rank, and no yaw to
+    // refine.
     let tells = settings.starts_deg.len().min(2);
     let first: Vec<(usize, f32)> = settings.starts_deg[..tells].iter().map(|&yaw| (kept[0], yaw)).collect();
     record(
@@ -2034,7 +2038,10 @@ fn search_pose(
         &mut starts,
         &mut candidates,
     )?;
-    let symmetric = tells == 2 && renders_alike(&starts[0], &starts[1]);
+    let symmetric = match probe.alike_turned {
+        Some(alike) => alike,
+        None => tells == 2 && renders_alike(&starts[0], &starts[1]),
+    };
     let rest: Vec<(usize, f32)> = kept
         .iter()
         .enumerate()
@@ -2495,6 +2502,7 @@ pub fn estimate_with_progress(
         edges: EdgeAdjacency::new(&asset.mesh),
         top_known: built_along_y,
         turns_show: init::turns_show(&asset.mesh),
+        alike_turned: init::looks_alike_turned(asset),
     };
     // The photo as the estimate works on it (box-filtered when its mask
     // holds more pixels than `working_mask_pixels`).
@@ -2864,6 +2872,7 @@ mod tests {
             edges: EdgeAdjacency::new(&asset.mesh),
             top_known: true,
             turns_show: false,
+            alike_turned: init::looks_alike_turned(asset),
         }
     }
 
