@@ -891,6 +891,26 @@ mod tests {
             ..cap.clone()
         };
         assert_eq!(looks_alike_turned(&turned), Some(true));
+        // One facet in seven, each slid along the axis by its own fraction
+        // of 4 mm (a coarse scan's irregular facets): still of revolution,
+        // but no circle is sampled often enough to tell.
+        let (mut positions, mut normals, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (t, corners) in cap.mesh.triangles.iter().enumerate().step_by(7) {
+            let slide = Vec3::Y * 4e-3 * (t as f32 * 0.618_034).fract();
+            let first = positions.len() as u32;
+            for &i in corners {
+                positions.push(cap.mesh.positions[i as usize] + slide);
+                normals.push(cap.mesh.normals[i as usize]);
+                uvs.push(cap.mesh.uvs[i as usize]);
+            }
+            triangles.push([first, first + 1, first + 2]);
+        }
+        let irregular = ProbeAsset {
+            mesh: Mesh::new(positions, normals, uvs, triangles),
+            ..cap.clone()
+        };
+        assert!(axis_of_revolution(&irregular.mesh).is_some());
+        assert_eq!(looks_alike_turned(&irregular), None);
         // A sphere has no single axis: the renders tell.
         assert_eq!(
             looks_alike_turned(&render::procedural::UvSphere::default().build()),
