@@ -27,7 +27,7 @@ use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 use render::{RenderError, Result};
 
 use super::{ImageTerms, Term, TermContext, mask_mean_luminance};
-use crate::estimate::init::front_facing;
+use crate::estimate::hypotheses::front_facing;
 
 /// The largest relative gradient error [`TermCheck::passes`] accepts.
 pub const TOLERANCE: f64 = 1e-6;

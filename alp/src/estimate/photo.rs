@@ -1,0 +1,332 @@
+//! The photo stage: the HDR image, the probe's mask and the camera, checked
+//! to agree; the pixels clipped by the sensor; and the working image, the
+//! photo box-filtered when its mask holds more pixels than time and memory
+//! allow. Everything after this stage reads the photo through [`Photo`].
+
+use render::camera::Camera;
+use render::image_io::{Mask, RgbImage};
+use render::{RenderError, Result};
+
+/// The photo and what is known about it.
+pub struct Photo {
+    /// Linear HDR RGB.
+    pub image: RgbImage,
+    /// The probe's segmentation.
+    pub mask: Mask,
+    /// The camera that took it.
+    pub camera: Camera,
+}
+
+impl Photo {
+    /// Checks that image, mask and camera agree and that the mask is usable.
+    pub fn new(image: RgbImage, mask: Mask, camera: Camera) -> Result<Self> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if (image.width, image.height) != (w, h) {
+            return Err(RenderError::value(
+                "image",
+                format!("is {}x{} but the camera is {w}x{h}", image.width, image.height),
+            ));
+        }
+        if (mask.width, mask.height) != (w, h) {
+            return Err(RenderError::value(
+                "mask",
+                format!("is {}x{} but the camera is {w}x{h}", mask.width, mask.height),
+            ));
+        }
+        if mask.count() < 16 {
+            return Err(RenderError::value(
+                "mask",
+                format!("marks {} pixels: too few to estimate anything from", mask.count()),
+            ));
+        }
+        if image
+            .pixels
+            .iter()
+            .any(|p| p.iter().any(|c| !c.is_finite() || *c < 0.0))
+        {
+            return Err(RenderError::value("image", "holds NaN, infinite or negative radiance"));
+        }
+        Ok(Photo { image, mask, camera })
+    }
+
+    /// The photo box-filtered by `factor` (at least 1, not necessarily
+    /// whole), with its clipped pixels (`clipped`, one flag per pixel):
+    /// each pixel the mean over a `factor x factor` square of the photo
+    /// (the pixels it cuts count by the area they share with it), in the
+    /// mask when at least half of the square is, clipped when any of it is
+    /// (a mean over a clipped pixel is no measurement either). The squares
+    /// are centred on the photo's centre; what makes no whole square is
+    /// cropped, evenly from both sides. The camera keeps its centre of
+    /// projection and gets a focal length `factor` times shorter in pixels:
+    /// a point projects into the square it projected into, at the same
+    /// place in it, and a pixel of the render is the mean over the photo's
+    /// square.
+    pub fn downsampled(&self, factor: f64, clipped: &[bool]) -> Result<(Photo, Vec<bool>)> {
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        let blocks = |n: usize| match factor >= 1.0 {
+            true => (n as f64 / factor).floor() as usize,
+            false => 0,
+        };
+        let (bw, bh) = (blocks(w), blocks(h));
+        if bw == 0 || bh == 0 || clipped.len() != w * h {
+            return Err(RenderError::value(
+                "downsampling",
+                format!(
+                    "factor {factor} for {w}x{h} pixels ({} clipped flags): not at least 1, or no whole square",
+                    clipped.len()
+                ),
+            ));
+        }
+        // Per square along one axis of `n` pixels: each pixel it overlaps
+        // and by how much.
+        let spans = |n: usize, blocks: usize| -> Vec<Vec<(usize, f64)>> {
+            let first = 0.5 * (n as f64 - blocks as f64 * factor);
+            (0..blocks)
+                .map(|b| {
+                    let (lo, hi) = (first + b as f64 * factor, first + (b + 1) as f64 * factor);
+                    (lo.floor() as usize..(hi.ceil() as usize).min(n))
+                        .map(|j| (j, hi.min(j as f64 + 1.0) - lo.max(j as f64)))
+                        .collect()
+                })
+                .collect()
+        };
+        let (columns, rows) = (spans(w, bw), spans(h, bh));
+        let half_height = (self.camera.fov_y_deg.to_radians() * 0.5).tan() * (bh as f64 * factor / h as f64) as f32;
+        let camera = Camera::new(
+            bw as u32,
+            bh as u32,
+            2.0 * half_height.atan().to_degrees(),
+            self.camera.origin,
+            self.camera.target,
+            self.camera.up,
+        )?;
+        let area = factor * factor;
+        let mut pixels = Vec::with_capacity(bw * bh);
+        let (mut inside, mut clipped_blocks) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
+        for row in &rows {
+            for column in &columns {
+                let (mut sum, mut marked, mut any_clipped) = ([0.0f64; 3], 0.0, false);
+                for &(y, wy) in row {
+                    for &(x, wx) in column {
+                        let (i, weight) = (y * w + x, wy * wx);
+                        (0..3).for_each(|c| sum[c] += weight * self.image.pixels[i][c] as f64);
+                        marked += weight * self.mask.inside[i] as u8 as f64;
+                        any_clipped |= clipped[i];
+                    }
+                }
+                pixels.push(sum.map(|v| (v / area) as f32));
+                inside.push(2.0 * marked >= area);
+                clipped_blocks.push(any_clipped);
+            }
+        }
+        let photo = Photo::new(RgbImage::new(bw, bh, pixels), Mask::new(bw, bh, inside), camera)?;
+        Ok((photo, clipped_blocks))
+    }
+}
+
+/// The factor by which a photo whose mask holds `mask_pixels` is
+/// box-filtered to hold about `budget` (1: as it is; `budget` 0: never).
+pub fn working_factor(mask_pixels: usize, budget: usize) -> f64 {
+    match budget {
+        0 => 1.0,
+        _ => (mask_pixels as f64 / budget as f64).sqrt().max(1.0),
+    }
+}
+
+/// How many of the mask's pixels lie on the image's outermost rows and
+/// columns.
+pub fn mask_on_border(mask: &Mask) -> usize {
+    let (w, h) = (mask.width, mask.height);
+    (0..w * h)
+        .filter(|&i| mask.inside[i] && (i % w == 0 || i % w == w - 1 || i / w == 0 || i / w == h - 1))
+        .count()
+}
+
+/// Pixels at the photo's clipping level: when many mask pixels share the
+/// maximum value of a channel, the sensor saturated there.
+pub(super) fn clipped_pixels(photo: &Photo) -> Vec<bool> {
+    let mut clipped = vec![false; photo.mask.inside.len()];
+    for c in 0..3 {
+        let max = photo
+            .image
+            .pixels
+            .iter()
+            .zip(&photo.mask.inside)
+            .filter(|(_, m)| **m)
+            .map(|(p, _)| p[c])
+            .fold(0.0f32, f32::max);
+        let at_max: Vec<usize> = (0..clipped.len())
+            .filter(|&i| photo.mask.inside[i] && photo.image.pixels[i][c] >= 0.9999 * max)
+            .collect();
+        if at_max.len() * 200 > photo.mask.count() {
+            at_max.into_iter().for_each(|i| clipped[i] = true);
+        }
+    }
+    clipped
+}
+
+/// Whether pixel `p` (covered by the probe to `coverage`) is data: inside
+/// the photo's mask, wholly on the probe (a partly covered pixel mixes in
+/// the background) and not clipped.
+pub(super) fn usable_pixel(photo: &Photo, clipped: &[bool], p: u32, coverage: f32) -> bool {
+    photo.mask.inside[p as usize] && coverage >= 1.0 && !clipped[p as usize]
+}
+
+/// Which of the probe's pixels a lighting fit reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Pixels {
+    /// Every pixel.
+    All,
+    /// Those whose row and column sum to an even number: half the samples,
+    /// transport and solve of the whole, spread evenly over the probe.
+    Checkerboard,
+}
+
+impl Pixels {
+    /// Whether the fit reads pixel `p` of an image `width` wide.
+    pub(super) fn keeps(self, p: u32, width: u32) -> bool {
+        match self {
+            Pixels::All => true,
+            Pixels::Checkerboard => (p % width + p / width).is_multiple_of(2),
+        }
+    }
+
+    /// The nearest pixels the fit also reads around pixel `p` of a
+    /// `width x height` image (row-major indices): the 4-neighbours, or
+    /// on a checkerboard the diagonal ones.
+    pub(super) fn neighbours(self, p: usize, width: usize, height: usize) -> [Option<usize>; 4] {
+        let (x, y) = ((p % width) as isize, (p / width) as isize);
+        let at = |dx: isize, dy: isize| {
+            let (u, v) = (x + dx, y + dy);
+            ((0..width as isize).contains(&u) && (0..height as isize).contains(&v))
+                .then(|| v as usize * width + u as usize)
+        };
+        match self {
+            Pixels::All => [at(-1, 0), at(1, 0), at(0, -1), at(0, 1)],
+            Pixels::Checkerboard => [at(-1, -1), at(1, -1), at(-1, 1), at(1, 1)],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec2;
+    use glam::Vec3;
+
+    #[test]
+    fn a_photo_box_filtered_keeps_every_point_in_its_square() {
+        // Sizes and factors that crop an even, an odd and no margin, and
+        // squares that cut pixels anywhere; a 60 deg view, tried to its
+        // corners.
+        for (w, h, factor) in [
+            (64, 48, 2.0),
+            (65, 49, 2.0),
+            (64, 48, 3.0),
+            (66, 50, 4.0),
+            (64, 48, 1.37),
+        ] {
+            let camera = Camera::new(w, h, 60.0, Vec3::new(0.1, 0.3, 0.5), Vec3::ZERO, Vec3::Y).unwrap();
+            let (w, h) = (w as usize, h as usize);
+            // Red is the pixel's column plus 100 times its row; green and
+            // blue are constant.
+            let pixels: Vec<[f32; 3]> = (0..w * h).map(|i| [(i % w + 100 * (i / w)) as f32, 1.0, 2.0]).collect();
+            let inside: Vec<bool> = (0..w * h).map(|i| i % w < w / 2).collect();
+            let clipped: Vec<bool> = (0..w * h).map(|i| i % w == w - 1).collect();
+            let photo = Photo::new(RgbImage::new(w, h, pixels), Mask::new(w, h, inside), camera).unwrap();
+            let (small, small_clipped) = photo.downsampled(factor, &clipped).unwrap();
+            let (bw, bh) = ((w as f64 / factor) as usize, (h as f64 / factor) as usize);
+            assert_eq!((small.camera.width as usize, small.camera.height as usize), (bw, bh));
+            // Where the squares start in the photo.
+            let origin = 0.5
+                * Vec2::new(
+                    (w as f64 - bw as f64 * factor) as f32,
+                    (h as f64 - bh as f64 * factor) as f32,
+                );
+            let to_photo = |p: Vec2| origin + factor as f32 * p;
+            for (b, &value) in small.image.pixels.iter().enumerate() {
+                let centre = to_photo(Vec2::new((b % bw) as f32 + 0.5, (b / bw) as f32 + 0.5));
+                // The mean of the pixels' columns (rows) over the square's
+                // span, by 4096 samples across it: red's mean over the square.
+                let mean_index = |start: f32| {
+                    (0..4096)
+                        .map(|k| (start as f64 + (k as f64 + 0.5) / 4096.0 * factor).floor())
+                        .sum::<f64>()
+                        / 4096.0
+                };
+                let corner = centre - 0.5 * factor as f32;
+                let expected = mean_index(corner.x) + 100.0 * mean_index(corner.y);
+                assert!(
+                    (value[0] as f64 - expected).abs() < 0.1,
+                    "square {b}: {value:?}, not {expected}"
+                );
+                assert!((value[1] - 1.0).abs() < 1e-6 && (value[2] - 2.0).abs() < 1e-6);
+                assert_eq!(
+                    small.mask.inside[b],
+                    centre.x <= (w / 2) as f32,
+                    "square {b} at {centre}"
+                );
+                let last = to_photo(Vec2::new((b % bw + 1) as f32, 0.0)).x;
+                assert_eq!(small_clipped[b], last > (w - 1) as f32, "square {b} ends at {last}");
+            }
+            // A world point projects into the square it projected into, at
+            // the same place in it.
+            for (u, v) in [(0.5, 0.5), (0.02, 0.03), (0.97, 0.02), (0.03, 0.98), (0.98, 0.97)] {
+                let full = Vec2::new(u * w as f32, v * h as f32);
+                let point = camera.origin + 0.4 * camera.direction_through(full);
+                let expected = (full - origin) / factor as f32;
+                let found = small.camera.project(point).unwrap();
+                assert!(
+                    (found - expected).length() < 1e-4,
+                    "{w}x{h} by {factor}: ({u}, {v}) projects to {found}, not {expected}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn mask_pixels_on_the_border_are_counted_on_all_four_sides_and_only_there() {
+        let (w, h) = (6, 5);
+        let count = |marked: &[usize]| {
+            let mut inside = vec![false; w * h];
+            marked.iter().for_each(|&i| inside[i] = true);
+            mask_on_border(&Mask::new(w, h, inside))
+        };
+        // The interior, then one pixel on each side, then a corner.
+        assert_eq!(count(&[7, 8, 9, 13, 14, 15, 19, 20, 21]), 0);
+        assert_eq!(count(&[2, 6, 11, 27]), 4);
+        assert_eq!(count(&[0, 14]), 1);
+    }
+
+    #[test]
+    fn the_working_factor_brings_the_mask_to_the_budget() {
+        assert_eq!(working_factor(40_000, 40_000), 1.0);
+        assert_eq!(working_factor(10_000, 40_000), 1.0);
+        assert_eq!(working_factor(160_000, 40_000), 2.0);
+        assert!((working_factor(50_000, 40_000) - 1.25f64.sqrt()).abs() < 1e-12);
+        assert_eq!(working_factor(10_000_000, 0), 1.0);
+    }
+
+    #[test]
+    fn a_fit_on_part_of_the_pixels_compares_each_with_its_nearest_kept_neighbours() {
+        let (width, height) = (5usize, 4usize);
+        for pixels in [Pixels::All, Pixels::Checkerboard] {
+            let kept = |p: usize| pixels.keeps(p as u32, width as u32);
+            let count = (0..width * height).filter(|&p| kept(p)).count();
+            assert_eq!(count, if pixels == Pixels::All { 20 } else { 10 }, "{pixels:?}");
+            for p in (0..width * height).filter(|&p| kept(p)) {
+                let (x, y) = ((p % width) as i64, (p / width) as i64);
+                let found: Vec<usize> = pixels.neighbours(p, width, height).into_iter().flatten().collect();
+                // Every kept pixel in the image at the nearest distance, and nothing else.
+                let nearest = |q: usize| {
+                    let (u, v) = ((q % width) as i64, (q / width) as i64);
+                    (u - x).pow(2) + (v - y).pow(2) == if pixels == Pixels::All { 1 } else { 2 }
+                };
+                let expected: Vec<usize> = (0..width * height).filter(|&q| kept(q) && nearest(q)).collect();
+                let mut sorted = found.clone();
+                sorted.sort();
+                assert_eq!(sorted, expected, "{pixels:?}: pixel {p}");
+            }
+        }
+    }
+}

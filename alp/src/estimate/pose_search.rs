@@ -1,0 +1,433 @@
+//! The photo-scored pose searches: at a pose, the lighting solved from a
+//! nearby pose's map (with MIS guided by it) and its data term's weighted
+//! error score how well the pose explains the photo. Line searches over one
+//! parameter of the pose at a time (the size, the lean towards the view
+//! ray, the sway, the turn) and the rival test use that score; a probe small
+//! in the photo is refined by rounds of them.
+
+use std::time::Instant;
+
+use render::Result;
+use render::camera::Camera;
+use render::integrator::{LightSampling, RenderSettings};
+use render::mesh::Mesh;
+use render::pose::Pose;
+use render::sampling::EnvSampler;
+
+use super::lighting::{
+    LEAN_SOLVE_ITERS, LightingFit, LightingPurpose, Smoothness, env_from_texels, final_spp, fit_lighting,
+    lighting_report,
+};
+use super::photo::{Photo, Pixels};
+use super::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep};
+use super::settings::Settings;
+use super::{Probe, hypotheses};
+
+/// The lean (degrees) that maximises `score` within `reach` either way,
+/// by a line search: leans of 0 and of `step` either way; while one side
+/// rises, steps doubling that way; then the vertex of the parabola through
+/// the best lean tried and its neighbours, where it is a maximum. A lean
+/// that cannot be scored scores minus infinity. Returns every (lean,
+/// score) tried, in order.
+pub(super) fn line_search_max(
+    step: f32,
+    reach: f32,
+    mut score: impl FnMut(f32) -> Result<f64>,
+) -> Result<Vec<(f32, f64)>> {
+    let mut tried = vec![(0.0, score(0.0)?), (-step, score(-step)?), (step, score(step)?)];
+    let (centre, minus, plus) = (tried[0].1, tried[1].1, tried[2].1);
+    if minus.max(plus) > centre {
+        let (mut x, mut best) = match plus >= minus {
+            true => (step, plus),
+            false => (-step, minus),
+        };
+        while (2.0 * x).abs() <= reach {
+            let next = score(2.0 * x)?;
+            tried.push((2.0 * x, next));
+            if next <= best {
+                break;
+            }
+            (x, best) = (2.0 * x, next);
+        }
+    }
+    let mut sorted = tried.clone();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let top = (0..sorted.len()).fold(0, |b, k| if sorted[k].1 > sorted[b].1 { k } else { b });
+    if top > 0 && top + 1 < sorted.len() {
+        let ((x1, f1), (x2, f2), (x3, f3)) = (sorted[top - 1], sorted[top], sorted[top + 1]);
+        let (a, b) = ((x2 - x1) as f64, (x2 - x3) as f64);
+        let denominator = a * (f2 - f3) - b * (f2 - f1);
+        // The best lean tried is above both neighbours: the parabola is
+        // concave (unless a neighbour failed: no parabola then).
+        if f1.is_finite() && f3.is_finite() && denominator.abs() > 0.0 {
+            let vertex = x2 as f64 - 0.5 * (a * a * (f2 - f3) - b * b * (f2 - f1)) / denominator;
+            let vertex = (vertex as f32).clamp(x1, x3);
+            tried.push((vertex, score(vertex)?));
+        }
+    }
+    Ok(tried)
+}
+
+/// The pose searches' measure of `pose`: the lighting solved there from
+/// the map `start` (of a pose near it) with MIS guided by that map
+/// ([`Settings::spp_lean`], [`LEAN_SOLVE_ITERS`], on the pixels `pixels`
+/// keeps), and its data term's weighted error in -dB (higher is better;
+/// minus infinity with no data pixel left): the weighted error, not the
+/// PSNR, which a sun's highlight dominates.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn pose_score(
+    probe: &Probe,
+    photo: &Photo,
+    pose: &Pose,
+    start: &[f64],
+    work: (usize, usize),
+    clipped: &[bool],
+    settings: &Settings,
+    pixels: Pixels,
+) -> Result<(LightingFit, f64)> {
+    let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
+    let sampling = LightSampling::mis(&sampler).with_interreflection();
+    let render = RenderSettings {
+        spp: final_spp(settings.spp_lean, photo.mask.count(), sampling.strategies()),
+        seed: settings.seed.wrapping_add(79),
+    };
+    let fit = fit_lighting(
+        probe,
+        photo,
+        pose,
+        work,
+        &render,
+        clipped,
+        Smoothness::quadratic(settings.smoothness),
+        LightingPurpose::Output,
+        pixels,
+        &sampling,
+        Some(start),
+        LEAN_SOLVE_ITERS,
+    )?;
+    let score = match fit.weighted_sq_error() {
+        error if error > 0.0 => -10.0 * error.log10(),
+        _ => f64::NEG_INFINITY,
+    };
+    Ok((fit, score))
+}
+
+/// A line search over one parameter of the pose ([`line_search_max`] in
+/// steps of `step`, up to `reach` either way; `candidate(x)` is the pose
+/// at `x`, 0 the searched one), each candidate scored by [`pose_score`]
+/// from the map `start` (`scored`: the searched pose's score and map,
+/// when they are known already). A candidate is kept only if it beats the
+/// searched pose by [`Settings::search_margin_db`]. Each candidate scored
+/// is a phase named `phase`. Returns the kept pose, its score and map, and
+/// the search's account.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn pose_line_search(
+    probe: &Probe,
+    photo: &Photo,
+    start: &[f64],
+    work: (usize, usize),
+    clipped: &[bool],
+    settings: &Settings,
+    phases: &mut PhaseLog,
+    phase: &str,
+    (step, reach): (f32, f32),
+    pixels: Pixels,
+    mut scored: Option<(f64, Vec<f64>)>,
+    candidate: impl Fn(f32) -> Pose,
+) -> Result<(Pose, (f64, Vec<f64>), LineSearchReport)> {
+    // The searched pose's map, and the best candidate's (not their transports).
+    let mut centre: Option<Vec<f64>> = None;
+    let mut best: Option<(f32, Vec<f64>, f64)> = None;
+    let tried = line_search_max(step, reach, |x| {
+        let t1 = Instant::now();
+        let pose = candidate(x);
+        let known = match x == 0.0 {
+            true => scored.take(),
+            false => None,
+        };
+        let (score, map) = match known {
+            Some(known) => known,
+            None => match pose_score(probe, photo, &pose, start, work, clipped, settings, pixels) {
+                Ok((fit, score)) => {
+                    phases.expect_more(1);
+                    phases.push(PhaseReport {
+                        pose: Some(PoseRecord::from(&pose)),
+                        ..lighting_report(phase, &fit, t1)
+                    });
+                    (score, fit.into_map())
+                }
+                // A pose that takes the probe out of the view is no candidate.
+                Err(_) if x != 0.0 => return Ok(f64::NEG_INFINITY),
+                Err(e) => return Err(e),
+            },
+        };
+        if centre.is_none() {
+            centre = Some(map.clone());
+        }
+        if best.as_ref().is_none_or(|b| score > b.2) {
+            best = Some((x, map, score));
+        }
+        Ok(score)
+    })?;
+    let (x, map, score) = best.expect("the line search scores the searched pose");
+    let (kept, kept_scored) = match score > tried[0].1 + settings.search_margin_db {
+        true => (x, (score, map)),
+        false => (0.0, (tried[0].1, centre.expect("the searched pose is scored first"))),
+    };
+    Ok((candidate(kept), kept_scored, LineSearchReport { tried, kept }))
+}
+
+/// Rounds at most of [`refine_by_photo`].
+pub(super) const PHOTO_REFINE_ROUNDS: usize = 3;
+
+/// A rival's score by the pose searches' measure and the map solved for it,
+/// with its pilot map (an error where the photo cannot show it).
+pub(super) type ScoredRival = Result<((f64, Vec<f64>), Vec<f64>)>;
+
+/// Whether the photo refines the pose search's choice and rivals
+/// (`Settings::photo_refine_px`; a lean search to refine by).
+pub(super) fn photo_refines(photo: &Photo, settings: &Settings) -> bool {
+    settings.lean_step_deg > 0.0 && photo.mask.count() <= settings.photo_refine_px
+}
+
+/// The turn's step and reach in a refinement, as multiples of the lean's:
+/// a turn moves the probe's surface by its radius per radian, a lean by
+/// its half length, about twice as far on a can.
+pub(super) const TURN_PER_LEAN: f32 = 2.0;
+
+/// `pose` refined by the photo: line searches ([`pose_line_search`],
+/// phase `lighting_refine`) over the lean, the sway ([`hypotheses::swayed`]) and,
+/// for a `patterned` probe, the turn about its axis, each from where the
+/// one before left it, in rounds until one keeps no move (at most
+/// [`PHOTO_REFINE_ROUNDS`]). Every candidate's lighting is solved from
+/// `start`, the map of a pose near it; `scored` is `pose`'s score, if
+/// known. Rounds, because the score ripples (its samples move with the
+/// pose) and a search whose first steps both score lower stops: the small
+/// courtyard can's right end (see `Settings::photo_refine_px`) leaned 0.12
+/// deg in the first round, its steps of 0.3 either way scoring lower, and
+/// from there 2.4 in the second, 4.1 -> 11.7 dB. (First steps of 0.6 or
+/// 1.2 deg instead, on 20 small probes: 18 and 17 poses found, against
+/// 19.) Returns the pose, its score and map; each search goes to `steps`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn refine_by_photo(
+    probe: &Probe,
+    photo: &Photo,
+    start: &[f64],
+    work: (usize, usize),
+    clipped: &[bool],
+    settings: &Settings,
+    phases: &mut PhaseLog,
+    patterned: bool,
+    candidate: &'static str,
+    pose: Pose,
+    scored: Option<(f64, Vec<f64>)>,
+    steps: &mut Vec<RefinementStep>,
+) -> Result<(Pose, (f64, Vec<f64>))> {
+    let (mut pose, mut scored) = (pose, scored);
+    let lean = (settings.lean_step_deg, settings.lean_reach_deg);
+    let turn = (TURN_PER_LEAN * lean.0, TURN_PER_LEAN * lean.1);
+    type Move = fn(&Pose, &Mesh, &Camera, f32) -> Pose;
+    let directions: [(&'static str, (f32, f32), Move); 3] = [
+        ("lean", lean, hypotheses::leaned),
+        ("sway", lean, hypotheses::swayed),
+        ("turn", turn, |pose, mesh, _, deg| hypotheses::turned(pose, mesh, deg)),
+    ];
+    let (mesh, camera) = (&probe.asset.mesh, &photo.camera);
+    for _ in 0..PHOTO_REFINE_ROUNDS {
+        let mut moved = false;
+        for &(direction, reach, moved_by) in &directions[..2 + patterned as usize] {
+            let from = pose;
+            let (kept, kept_scored, search) = pose_line_search(
+                probe,
+                photo,
+                start,
+                work,
+                clipped,
+                settings,
+                phases,
+                "lighting_refine",
+                reach,
+                Pixels::All,
+                scored.take(),
+                |x| moved_by(&from, mesh, camera, x),
+            )?;
+            moved |= search.kept != 0.0;
+            (pose, scored) = (kept, Some(kept_scored));
+            steps.push(RefinementStep {
+                candidate,
+                direction,
+                search,
+            });
+        }
+        if !moved {
+            break;
+        }
+    }
+    Ok((pose, scored.expect("the searches score the pose")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::Quality;
+    use crate::estimate::lighting::SOLVE_ITERS;
+    use crate::estimate::testing::{photo_of, probe_of};
+    use glam::{Quat, Vec3};
+    use render::envmap::EnvMap;
+    use render::procedural::SodaCan;
+
+    #[test]
+    fn the_photo_refines_a_small_can_s_axis_searching_its_lean_sway_and_turn_in_turn() {
+        let asset = SodaCan::default().build();
+        let probe = probe_of(&asset);
+        // A can of 1,713 px in a 160x120 photo, under the courtyard: its
+        // label and the light tell its pose, its outline hardly.
+        let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
+        let camera = Camera::new(
+            160,
+            120,
+            40.0,
+            Vec3::new(0.0, 0.15, 0.35),
+            Vec3::new(0.0, 0.06, 0.0),
+            Vec3::Y,
+        )
+        .expect("camera");
+        let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
+        let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
+        let photo = photo_of(&asset, &truth, camera, &env, 16);
+        let settings = Settings::new(Quality::Default);
+        assert!(photo_refines(&photo, &settings), "{} px", photo.mask.count());
+        // Off as the outline leaves a small probe: leaned 1.5 deg, swayed
+        // 0.5, turned 3.
+        let (mesh, camera) = (&asset.mesh, &photo.camera);
+        let start = hypotheses::turned(
+            &hypotheses::swayed(&hypotheses::leaned(&truth, mesh, camera, 1.5), mesh, camera, 0.5),
+            mesh,
+            3.0,
+        );
+        let clipped = vec![false; photo.camera.pixel_count()];
+        let work = (128, 64);
+        let pilot = fit_lighting(
+            &probe,
+            &photo,
+            &start,
+            work,
+            &RenderSettings { spp: 16, seed: 78 },
+            &clipped,
+            Smoothness::quadratic(settings.smoothness),
+            LightingPurpose::Output,
+            Pixels::All,
+            &LightSampling::BSDF.with_interreflection(),
+            None,
+            SOLVE_ITERS,
+        )
+        .expect("a pilot map")
+        .into_map();
+        let mut on_phase = |_: &PhaseReport, _: usize, _: usize| {};
+        let mut phases = PhaseLog {
+            phases: Vec::new(),
+            expected: 0,
+            on_phase: &mut on_phase,
+        };
+        let mut steps = Vec::new();
+        let (refined, (score, _)) = refine_by_photo(
+            &probe,
+            &photo,
+            &pilot,
+            work,
+            &clipped,
+            &settings,
+            &mut phases,
+            true,
+            "chosen",
+            start,
+            None,
+            &mut steps,
+        )
+        .expect("a refinement");
+        // The axis: 1.58 -> 0.26 deg. (The turn, 3 deg off, gains 0.17 dB
+        // at most here, under the searches' margin: this photo hardly
+        // shows it.)
+        let off = |p: &Pose| {
+            (p.rotation * Vec3::Y)
+                .angle_between(truth.rotation * Vec3::Y)
+                .to_degrees()
+        };
+        assert!(
+            off(&refined) < 0.3 * off(&start),
+            "axis {} -> {} deg off",
+            off(&start),
+            off(&refined)
+        );
+        // Rounds of the three directions in order, each search's first
+        // candidate where the one before left the pose.
+        assert!(
+            steps.len() >= 6 && steps.len().is_multiple_of(3),
+            "{} searches",
+            steps.len()
+        );
+        for (k, step) in steps.iter().enumerate() {
+            assert_eq!(step.candidate, "chosen");
+            assert_eq!(step.direction, ["lean", "sway", "turn"][k % 3]);
+            assert_eq!(step.search.tried[0].0, 0.0);
+        }
+        let last = &steps[steps.len() - 1].search;
+        assert_eq!(score, last.tried.iter().find(|t| t.0 == last.kept).expect("kept").1);
+        // A probe without a pattern is not turned.
+        let mut steps = Vec::new();
+        refine_by_photo(
+            &probe,
+            &photo,
+            &pilot,
+            work,
+            &clipped,
+            &settings,
+            &mut phases,
+            false,
+            "rival",
+            start,
+            None,
+            &mut steps,
+        )
+        .expect("a refinement");
+        assert!(steps.iter().all(|s| s.direction != "turn" && s.candidate == "rival"));
+    }
+
+    /// The leans `line_search_max` tries on `score` (step 0.3, reach 2.4).
+    fn leans_tried(score: impl Fn(f32) -> f64) -> Vec<(f32, f64)> {
+        line_search_max(0.3, 2.4, |x| Ok(score(x))).unwrap()
+    }
+
+    /// The best lean tried.
+    fn best(tried: &[(f32, f64)]) -> f32 {
+        tried.iter().fold(tried[0], |b, &t| if t.1 > b.1 { t } else { b }).0
+    }
+
+    #[test]
+    fn the_lean_search_finds_a_peak_near_the_start_or_walks_to_one_further_off_but_not_beyond_its_reach() {
+        // A peak within a step: 0 and a step either way, then the vertex.
+        let tried = leans_tried(|x| -(x as f64 - 0.1).powi(2));
+        assert_eq!(tried.len(), 4);
+        assert!((best(&tried) - 0.1).abs() < 1e-5, "{tried:?}");
+        // A peak 1 deg off: steps doubling towards it until the score falls
+        // (-0.6, -1.2, -2.4), then the vertex.
+        let tried = leans_tried(|x| -(x as f64 + 1.0).powi(2));
+        let leans: Vec<f32> = tried.iter().map(|t| t.0).collect();
+        assert_eq!(&leans[..6], &[0.0, -0.3, 0.3, -0.6, -1.2, -2.4]);
+        assert!((best(&tried) + 1.0).abs() < 1e-5, "{tried:?}");
+        // A peak beyond the reach: the search stops at the reach.
+        let tried = leans_tried(|x| -(x as f64 - 5.0).powi(2));
+        assert!(tried.iter().all(|t| t.0.abs() <= 2.4), "{tried:?}");
+        assert_eq!(best(&tried), 2.4);
+        // A flat score: nothing but the start and a step either way.
+        assert_eq!(leans_tried(|_| 1.0).len(), 3);
+        // Leans past 0.5 cannot be scored (the probe leaves the view): the
+        // walk stops there and no parabola runs through them.
+        let tried = leans_tried(|x| match x > 0.5 {
+            true => f64::NEG_INFINITY,
+            false => -(x as f64 - 1.0).powi(2),
+        });
+        assert!(tried.iter().all(|t| t.0.is_finite()), "{tried:?}");
+        assert_eq!(best(&tried), 0.3);
+    }
+}

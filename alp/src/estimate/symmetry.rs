@@ -1,0 +1,613 @@
+//! What the probe asset tells of its symmetry: its axis (of revolution, or
+//! the one direction of its surface's spread that stands out), whether a
+//! turn about it changes its outline, and whether it looks the same at
+//! every turn (its surface of revolution and its material the same all
+//! round each circle about the axis).
+
+use std::collections::BTreeMap;
+
+use glam::{DMat3, DVec3, Quat, Vec2, Vec3};
+use render::mesh::Mesh;
+use render::probe::ProbeAsset;
+
+/// Eigenvalues of the surface's spread closer than this factor are equal:
+/// no axis stands out (a sphere), or not that one.
+pub(super) const DISTINCT_SPREAD: f64 = 1.05;
+
+/// An axis found within this angle (degrees) of the mesh's +Y is +Y: the
+/// mesh was built along it (faceting tilts the found axis a little).
+pub(super) const AXIS_IS_Y_DEG: f64 = 1.0;
+
+/// A facet's normal line passes within this fraction of the surface's size
+/// (RMS distance from its centroid) of an axis of revolution it belongs to,
+/// measured as `((p - c) x n) . a`: faceting leaves a third of a 64-sided
+/// can's triangles within 1 %, all within 5 % (a triangle's centroid is off
+/// its quad's meridian); the surface has that axis when at least
+/// [`REVOLVED_SHARE`] of its area does.
+pub(super) const ON_AXIS: f64 = 0.05;
+
+/// An axis of revolution is one only when the next best line leaves this
+/// many times its residual (the suite's can, cap and ring: 780 to 3,900
+/// times; a sphere, 1.1).
+pub(super) const SECOND_AXIS_RATIO: f64 = 20.0;
+
+/// A surface this much of revolution about its axis (by area) shows one
+/// outline at every turn about it (the suite's can, cap and ring: all of
+/// it; a mug with a handle: 0.90).
+pub(super) const WHOLLY_REVOLVED: f64 = 0.98;
+
+/// Fits of the axis of revolution, each weighing the facets by how far the
+/// one before left their normal lines from it.
+pub(super) const REWEIGHTINGS: usize = 8;
+
+/// The share of a probe's surface that must be of revolution about one
+/// axis for that to be its axis (a mug's body without its handle).
+pub(super) const REVOLVED_SHARE: f64 = 0.6;
+
+/// The rotation that turns the probe's axis to mesh +Y: the estimate turns
+/// the probe about +Y (its yaw starts) and reads its length along it. The
+/// axis is the probe's axis of revolution ([`axis_of_revolution`]: a mug's
+/// body's, where the spread of its surface picks the direction across its
+/// handle), else the principal direction of the surface's spread
+/// (area-weighted second moments) whose spread stands out from the other
+/// two: the longest for a probe longer than wide, the shortest for one
+/// wider than long. Identity when the axis is already +Y (to
+/// [`AXIS_IS_Y_DEG`]) or none stands out (a sphere). Of the axis's two
+/// directions, the one nearer +Y, or with its largest component positive,
+/// goes to +Y.
+pub fn axis_to_y(mesh: &Mesh) -> Quat {
+    let revolved = axis_of_revolution(mesh).map(|revolution| revolution.axis);
+    let Some(axis) = revolved.or_else(|| axis_of_spread(mesh)) else {
+        return Quat::IDENTITY;
+    };
+    if axis.y.abs() >= AXIS_IS_Y_DEG.to_radians().cos() {
+        return Quat::IDENTITY;
+    }
+    let largest = axis.abs().max_element();
+    let positive = match axis.y.abs() > 1e-3 {
+        true => axis.y > 0.0,
+        false => axis
+            .to_array()
+            .iter()
+            .find(|v| v.abs() == largest)
+            .is_some_and(|v| *v > 0.0),
+    };
+    let axis = if positive { axis } else { -axis };
+    Quat::from_rotation_arc(axis.as_vec3().normalize(), Vec3::Y)
+}
+
+/// The facets of `mesh`: centroid, unit normal and area (degenerate ones
+/// left out).
+pub(super) fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
+    (0..mesh.triangles.len())
+        .filter_map(|t| {
+            let [a, b, c] = mesh.corners(t).map(|p| p.as_dvec3());
+            let twice_area = mesh.face_normal(t).as_dvec3();
+            let area = 0.5 * twice_area.length();
+            (area > 0.0).then(|| ((a + b + c) / 3.0, twice_area / (2.0 * area), area))
+        })
+        .collect()
+}
+
+/// The line about which at least [`REVOLVED_SHARE`] of the surface is of
+/// revolution, if there is one line only (a sphere, of revolution about
+/// every line through its centre, has none): its direction and that share.
+/// Every
+/// normal line of a surface of revolution meets its axis (or runs parallel
+/// to it): with the axis's direction `a` and moment `m = c x a` (`c` a
+/// point on it), each facet's `(p x n) . a + n . m` is 0 (`p` its centroid,
+/// `n` its normal; Pottmann and Randrup's line-geometric test for surfaces
+/// of revolution). Least squares over the facets' areas gives `m` for
+/// each `a`, and `a` as the least eigenvector of what is left; facets off
+/// the axis (a handle) are then weighed down and the fit repeated.
+pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
+    let facets = facets(mesh);
+    let area: f64 = facets.iter().map(|f| f.2).sum();
+    let centroid = facets.iter().map(|(p, _, w)| *p * *w).sum::<DVec3>() / area.max(1e-300);
+    let size = (facets
+        .iter()
+        .map(|(p, _, w)| w * (*p - centroid).length_squared())
+        .sum::<f64>()
+        / area.max(1e-300))
+    .sqrt();
+    if !size.is_finite() || size <= 0.0 {
+        return None;
+    }
+    // Centred and in units of the size: the residual is then a distance in sizes.
+    let lines: Vec<(DVec3, DVec3)> = facets.iter().map(|(p, n, _)| ((*p - centroid) / size, *n)).collect();
+    let mut weight: Vec<f64> = facets.iter().map(|f| f.2 / area).collect();
+    // The last fit's axis, residuals and whether a second line fits about as well.
+    let mut last = None;
+    for _ in 0..REWEIGHTINGS {
+        let outer = |u: DVec3, v: DVec3| DMat3::from_cols(u * v.x, u * v.y, u * v.z);
+        let (mut nn, mut mn, mut mm) = (DMat3::ZERO, DMat3::ZERO, DMat3::ZERO);
+        for ((p, n), &w) in lines.iter().zip(&weight) {
+            let pn = p.cross(*n);
+            nn += outer(*n, *n) * w;
+            mn += outer(pn, *n) * w;
+            mm += outer(pn, pn) * w;
+        }
+        if nn.determinant().abs() < 1e-12 {
+            return None;
+        }
+        // The moment that fits direction a best is -nn^-1 mn^T a; what is
+        // left is a^T (mm - mn nn^-1 mn^T) a.
+        let to_moment = -(nn.inverse() * mn.transpose());
+        let left = mm + mn * to_moment;
+        let (values, vectors) = symmetric_eigen(std::array::from_fn(|i| std::array::from_fn(|j| left.col(j)[i])));
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| values[i].total_cmp(&values[j]));
+        let axis = DVec3::from_array(vectors[order[0]]);
+        let moment = to_moment * axis;
+        let residual: Vec<f64> = lines
+            .iter()
+            .map(|(p, n)| (p.cross(*n).dot(axis) + n.dot(moment)).abs())
+            .collect();
+        weight = facets
+            .iter()
+            .zip(&residual)
+            .map(|(f, r)| f.2 / area / (1.0 + (r / ON_AXIS).powi(2)))
+            .collect();
+        // A second line that fits about as well: all normal lines pass
+        // through one point (a sphere), and every line through it is an axis.
+        let single = values[order[1]] >= SECOND_AXIS_RATIO * values[order[0]].max(1e-12);
+        last = Some((axis, moment, residual, single));
+    }
+    let (axis, moment, residual, single) = last?;
+    let revolved: f64 = facets
+        .iter()
+        .zip(&residual)
+        .filter(|(_, r)| **r <= ON_AXIS)
+        .map(|(f, _)| f.2)
+        .sum();
+    (single && revolved >= REVOLVED_SHARE * area).then_some(Revolution {
+        axis,
+        // The point of the line nearest the centroid, back in mesh units.
+        point: centroid + axis.cross(moment) * size,
+        share: revolved / area,
+    })
+}
+
+/// A probe's axis of revolution and the share of its surface's area that
+/// is of revolution about it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Revolution {
+    /// The axis's unit direction.
+    pub axis: DVec3,
+    /// A point on the axis.
+    pub point: DVec3,
+    /// The share of the area whose normal lines meet the axis (within [`ON_AXIS`]).
+    pub share: f64,
+}
+
+/// Whether turning the probe about its axis changes its outline: a surface
+/// not wholly of revolution (a mug's handle; a box), though not a sphere,
+/// of revolution about every line through its centre.
+pub fn turns_show(mesh: &Mesh) -> bool {
+    match axis_of_revolution(mesh) {
+        Some(revolution) => revolution.share < WHOLLY_REVOLVED,
+        None => axis_of_spread(mesh).is_some(),
+    }
+}
+
+/// Whether the probe looks the same at every turn about its axis of
+/// revolution, decided from the asset (Some): its whole surface of
+/// revolution, and its material (albedo, roughness, visibility) the same all
+/// round each circle about the axis, as on a cap of one colour and not on a
+/// can's label. None where the asset cannot tell: no single axis (a sphere,
+/// of revolution about every line through its centre), or facets that do
+/// not sample the circles (a scan's irregular mesh). Comparing two turns'
+/// renders tells it only where the mesh's facets come back at that turn
+/// (45 deg for the suite's 64-sided caps: at 30 deg, best quality's first
+/// two turns, the facets made the renders of 7 of its 9 caps differ by
+/// more than `renders_alike` allows: relative errors up to 1.5e-3 apart
+/// against 1e-4, or RGB angles 0.034 deg against 0.02; ranked as
+/// patterned, 2 upright caps came out end for end).
+pub fn looks_alike_turned(asset: &ProbeAsset) -> Option<bool> {
+    let revolution = axis_of_revolution(&asset.mesh)?;
+    if revolution.share < WHOLLY_REVOLVED {
+        return Some(false);
+    }
+    if [&asset.albedo, &asset.roughness, &asset.visibility]
+        .iter()
+        .all(|t| t.is_constant())
+    {
+        return Some(true);
+    }
+    let mesh = &asset.mesh;
+    let extent = mesh
+        .positions
+        .iter()
+        .map(|p| (p.as_dvec3() - revolution.point).length())
+        .fold(0.0, f64::max);
+    let bin = CIRCLE_BIN * extent;
+    // Per circle about the axis (height along it and radius from it, in
+    // bins): each channel's least and greatest value, the area sampled
+    // and the samples (in key order, so that the sums do not depend on a
+    // hash's seed).
+    let mut circles: BTreeMap<(i64, i64), Circle> = BTreeMap::new();
+    let mut total = 0.0;
+    for t in 0..mesh.triangles.len() {
+        let share = 0.5 * mesh.face_normal(t).length() as f64 / CIRCLE_SAMPLES.len() as f64;
+        if share.is_nan() || share <= 0.0 {
+            continue;
+        }
+        for b in CIRCLE_SAMPLES.map(|[b1, b2]| Vec2::new(b1, b2)) {
+            let p = mesh.interpolate(&mesh.positions, t, b).as_dvec3() - revolution.point;
+            let m = asset.material(mesh.interpolate(&mesh.uvs, t, b));
+            let value = [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness, m.visibility];
+            let height = p.dot(revolution.axis);
+            let radius = (p - revolution.axis * height).length();
+            let key = ((height / bin).round() as i64, (radius / bin).round() as i64);
+            let circle = circles.entry(key).or_insert(Circle {
+                least: value,
+                greatest: value,
+                area: 0.0,
+                samples: 0,
+            });
+            for ((least, greatest), v) in circle.least.iter_mut().zip(&mut circle.greatest).zip(value) {
+                *least = least.min(v);
+                *greatest = greatest.max(v);
+            }
+            circle.area += share;
+            circle.samples += 1;
+            total += share;
+        }
+    }
+    let area_where = |keep: &dyn Fn(&Circle) -> bool| circles.values().filter(|c| keep(c)).map(|c| c.area).sum::<f64>();
+    if area_where(&|c| c.samples >= CIRCLE_MIN_SAMPLES) < 0.5 * total {
+        return None;
+    }
+    let varied = area_where(&|c| {
+        c.least
+            .iter()
+            .zip(&c.greatest)
+            .any(|(least, greatest)| greatest - least > MATERIAL_TOLERANCE)
+    });
+    Some(varied <= VARIED_SHARE * total)
+}
+
+/// The material sampled along one circle about the axis of revolution.
+pub(super) struct Circle {
+    pub(super) least: [f32; 5],
+    pub(super) greatest: [f32; 5],
+    pub(super) area: f64,
+    pub(super) samples: usize,
+}
+
+/// Circles about the axis are told apart to this fraction of the probe's
+/// extent from it: points of a revolved mesh's facets that its turns map
+/// onto each other fall in one.
+pub(super) const CIRCLE_BIN: f64 = 1e-3;
+
+/// Where on each facet the material is sampled (barycentric weights of
+/// corners 1 and 2): its centroid and a point towards each corner.
+pub(super) const CIRCLE_SAMPLES: [[f32; 2]; 4] = [
+    [1.0 / 3.0, 1.0 / 3.0],
+    [1.0 / 6.0, 1.0 / 6.0],
+    [2.0 / 3.0, 1.0 / 6.0],
+    [1.0 / 6.0, 2.0 / 3.0],
+];
+
+/// A circle sampled this many times at least tells whether the material
+/// varies along it; the asset decides when such circles hold half its area.
+pub(super) const CIRCLE_MIN_SAMPLES: usize = 4;
+
+/// A material channel that varies by more than this along a circle shows
+/// the turn (an 8-bit texture's steps are 0.004).
+pub(super) const MATERIAL_TOLERANCE: f32 = 0.01;
+
+/// The material looks alike at every turn when the circles along which it
+/// varies hold at most this share of the area (the probe's own bands put a
+/// circle's samples on both sides of an edge only by rounding). The
+/// procedural cap: none of its 142 circles; the can: 33 % of its area.
+pub(super) const VARIED_SHARE: f64 = 0.01;
+
+/// The principal direction of the surface's spread that stands out from
+/// the other two, if one does (see [`axis_to_y`]).
+pub(super) fn axis_of_spread(mesh: &Mesh) -> Option<DVec3> {
+    let (mut area, mut first, mut second) = (0.0f64, [0.0f64; 3], [[0.0f64; 3]; 3]);
+    for t in 0..mesh.triangles.len() {
+        let [a, b, c] = mesh.corners(t).map(|p| p.as_dvec3());
+        let da = 0.5 * (b - a).cross(c - a).length();
+        let sum = a + b + c;
+        area += da;
+        for i in 0..3 {
+            first[i] += da * sum[i] / 3.0;
+            for j in 0..3 {
+                // The exact second moment of a triangle about the origin.
+                second[i][j] += da / 12.0 * (a[i] * a[j] + b[i] * b[j] + c[i] * c[j] + sum[i] * sum[j]);
+            }
+        }
+    }
+    if area <= 0.0 {
+        return None;
+    }
+    let mean = first.map(|m| m / area);
+    let spread: [[f64; 3]; 3] =
+        std::array::from_fn(|i| std::array::from_fn(|j| second[i][j] / area - mean[i] * mean[j]));
+    let (values, vectors) = symmetric_eigen(spread);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| values[i].total_cmp(&values[j]));
+    let [low, mid, high] = order.map(|k| values[k].max(1e-30));
+    let (stands_out, axis) = match high / mid > mid / low {
+        true => (high / mid, vectors[order[2]]),
+        false => (mid / low, vectors[order[0]]),
+    };
+    (stands_out >= DISTINCT_SPREAD).then(|| DVec3::from_array(axis))
+}
+
+/// Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix, by cyclic
+/// Jacobi rotations.
+pub(super) fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _ in 0..50 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off <= 1e-15 * scale {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = 0.5 * (a[q][q] - a[p][p]) / a[p][q];
+            // The smaller root of t^2 + 2 theta t - 1 = 0 (1 for theta 0).
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
+            // A <- J^T A J and V <- V J, J the rotation in the (p, q) plane.
+            let rotate_columns = |m: &mut [[f64; 3]; 3]| {
+                for row in m.iter_mut() {
+                    let (mp, mq) = (row[p], row[q]);
+                    row[p] = c * mp - s * mq;
+                    row[q] = s * mp + c * mq;
+                }
+            };
+            rotate_columns(&mut a);
+            rotate_columns(&mut v);
+            let (ap, aq) = (a[p], a[q]);
+            a[p] = std::array::from_fn(|k| c * ap[k] - s * aq[k]);
+            a[q] = std::array::from_fn(|k| s * ap[k] + c * aq[k]);
+        }
+    }
+    // Eigenvector k is column k of v.
+    let vectors = std::array::from_fn(|k| [v[0][k], v[1][k], v[2][k]]);
+    ([a[0][0], a[1][1], a[2][2]], vectors)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use render::pose::Pose;
+    use render::procedural::SodaCan;
+
+    #[test]
+    fn the_eigen_decomposition_rebuilds_its_matrix() {
+        let a = [[2.0, -0.7, 0.3], [-0.7, 1.1, 0.05], [0.3, 0.05, 0.4]];
+        let (values, vectors) = symmetric_eigen(a);
+        for i in 0..3 {
+            for j in 0..3 {
+                let rebuilt: f64 = (0..3).map(|k| values[k] * vectors[k][i] * vectors[k][j]).sum();
+                assert!(
+                    (rebuilt - a[i][j]).abs() < 1e-12,
+                    "({i}, {j}): {rebuilt} against {}",
+                    a[i][j]
+                );
+                let dot: f64 = (0..3).map(|k| vectors[i][k] * vectors[j][k]).sum();
+                assert!((dot - (i == j) as u8 as f64).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_probe_s_axis_goes_to_y_whichever_way_its_mesh_was_built() {
+        let can = SodaCan::default().build().mesh;
+        let cap = render::procedural::ThermosCap::default().build().mesh;
+        // A disc-like probe (wider than long, like a ring): a flattened
+        // sphere (its normals, which the axis does not read, left as they were).
+        let sphere = render::procedural::UvSphere::default().build().mesh;
+        let disc = Mesh {
+            positions: sphere
+                .positions
+                .iter()
+                .map(|p| Vec3::new(p.x, 0.3 * p.y, p.z))
+                .collect(),
+            ..sphere.clone()
+        };
+        // Built along +Y: left as it is (the suite's outputs stay as they were).
+        for mesh in [&can, &cap, &disc] {
+            assert_eq!(axis_to_y(mesh), Quat::IDENTITY);
+        }
+        // A sphere has no axis.
+        assert_eq!(axis_to_y(&sphere), Quat::IDENTITY);
+        // Built along another axis (and off the origin): turned to +Y.
+        let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
+        for mesh in [&can, &cap, &disc] {
+            let built = mesh.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
+            let to_y = axis_to_y(&built);
+            let axis = to_y * (turn * Vec3::Y);
+            assert!(axis.y.abs() > 0.9999, "the axis goes to {axis}");
+        }
+    }
+
+    /// A closed tube swept along `centre(t)` (t in [0, 1], `rings` steps)
+    /// with a circle of `radius` in the plane of `across(t)`'s two unit
+    /// vectors, `sides` facets round: a mug's body (swept along its axis)
+    /// or its handle (along an arc beside it).
+    fn tube(
+        centre: impl Fn(f32) -> Vec3,
+        across: impl Fn(f32) -> (Vec3, Vec3),
+        radius: f32,
+        (rings, sides): (usize, usize),
+        mesh: &mut (Vec<Vec3>, Vec<[u32; 3]>),
+    ) {
+        let first = mesh.0.len() as u32;
+        for k in 0..=rings {
+            let t = k as f32 / rings as f32;
+            let (u, v) = across(t);
+            for l in 0..sides {
+                let s = std::f32::consts::TAU * l as f32 / sides as f32;
+                mesh.0.push(centre(t) + radius * (s.cos() * u + s.sin() * v));
+            }
+        }
+        let at = |k: usize, l: usize| first + (k * sides + l % sides) as u32;
+        for k in 0..rings {
+            for l in 0..sides {
+                mesh.1.push([at(k, l), at(k, l + 1), at(k + 1, l + 1)]);
+                mesh.1.push([at(k, l), at(k + 1, l + 1), at(k + 1, l)]);
+            }
+        }
+    }
+
+    /// A mug built along +Y: a body 80 mm across and 95 mm tall, closed at
+    /// both ends, and a handle on its +X side above the middle. Not a solid
+    /// of revolution, and the spread of its surface picks another direction.
+    fn mug() -> Mesh {
+        let mut mesh = (Vec::new(), Vec::new());
+        let (r, h) = (0.04f32, 0.095f32);
+        tube(
+            |t| Vec3::new(0.0, h * t, 0.0),
+            |_| (Vec3::Z, Vec3::X),
+            r,
+            (24, 64),
+            &mut mesh,
+        );
+        // The ends: a fan from each centre to the body's first and last ring.
+        for (centre, ring) in [(Vec3::ZERO, 0u32), (Vec3::new(0.0, h, 0.0), 24 * 64)] {
+            let c = mesh.0.len() as u32;
+            mesh.0.push(centre);
+            for l in 0..64u32 {
+                let (a, b) = (ring + l, ring + (l + 1) % 64);
+                mesh.1.push(if ring == 0 { [c, b, a] } else { [c, a, b] });
+            }
+        }
+        let arc = |t: f32| std::f32::consts::PI * (t - 0.5);
+        tube(
+            |t| Vec3::new(r - 0.004 + 0.026 * arc(t).cos(), 0.6 * h + 0.026 * arc(t).sin(), 0.0),
+            |t| (Vec3::new(arc(t).cos(), arc(t).sin(), 0.0), Vec3::Z),
+            0.0075,
+            (32, 16),
+            &mut mesh,
+        );
+        let (positions, triangles) = mesh;
+        let n = positions.len();
+        Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles)
+    }
+
+    #[test]
+    fn a_mug_s_axis_is_its_body_s_not_the_direction_its_handle_spreads_it() {
+        let mug = mug();
+        let axis = axis_of_revolution(&mug).expect("the body's axis").axis;
+        assert!(axis.y.abs() > 0.5f64.to_radians().cos(), "axis {axis}");
+        // The surface's spread alone would take another direction for it.
+        let spread = axis_of_spread(&mug).expect("a direction stands out");
+        assert!(spread.y.abs() < 0.5, "spread {spread}");
+        assert_eq!(axis_to_y(&mug), Quat::IDENTITY);
+        // Its handle shows how it is turned; a can and a cap show nothing.
+        assert!(turns_show(&mug));
+        for probe in [
+            SodaCan::default().build(),
+            render::procedural::ThermosCap::default().build(),
+        ] {
+            assert!(!turns_show(&probe.mesh));
+        }
+        let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
+        let built = mug.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
+        let axis = axis_to_y(&built) * (turn * Vec3::Y);
+        assert!(axis.y.abs() > 0.9999, "the body's axis goes to {axis}");
+    }
+
+    #[test]
+    fn the_asset_tells_whether_a_turn_shows() {
+        let cap = render::procedural::ThermosCap::default().build();
+        // Its roughness varies along its profile only (a rougher recess).
+        assert!(!cap.roughness.is_constant());
+        assert_eq!(looks_alike_turned(&cap), Some(true));
+        // A rougher stripe down one side shows how it is turned.
+        let mut striped = cap.clone();
+        let image = &mut striped.roughness.image;
+        for row in 0..image.height {
+            for column in 0..image.width / 8 {
+                image.pixels[row * image.width + column] = [0.5; 3];
+            }
+        }
+        assert_eq!(looks_alike_turned(&striped), Some(false));
+        // So does a label, and a turned cap tells as the cap does.
+        assert_eq!(looks_alike_turned(&SodaCan::default().build()), Some(false));
+        let turned = ProbeAsset {
+            mesh: cap.mesh.posed(&Pose::new(
+                Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9),
+                1.0,
+                Vec3::new(0.2, -0.1, 0.05),
+            )),
+            ..cap.clone()
+        };
+        assert_eq!(looks_alike_turned(&turned), Some(true));
+        // One facet in seven, each slid along the axis by its own fraction
+        // of 4 mm (a coarse scan's irregular facets): still of revolution,
+        // but no circle is sampled often enough to tell.
+        let (mut positions, mut normals, mut uvs, mut triangles) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (t, corners) in cap.mesh.triangles.iter().enumerate().step_by(7) {
+            let slide = Vec3::Y * 4e-3 * (t as f32 * 0.618_034).fract();
+            let first = positions.len() as u32;
+            for &i in corners {
+                positions.push(cap.mesh.positions[i as usize] + slide);
+                normals.push(cap.mesh.normals[i as usize]);
+                uvs.push(cap.mesh.uvs[i as usize]);
+            }
+            triangles.push([first, first + 1, first + 2]);
+        }
+        let irregular = ProbeAsset {
+            mesh: Mesh::new(positions, normals, uvs, triangles),
+            ..cap.clone()
+        };
+        assert!(axis_of_revolution(&irregular.mesh).is_some());
+        assert_eq!(looks_alike_turned(&irregular), None);
+        // A sphere has no single axis: the renders tell.
+        assert_eq!(
+            looks_alike_turned(&render::procedural::UvSphere::default().build()),
+            None
+        );
+    }
+
+    #[test]
+    fn a_sphere_and_a_box_have_no_axis_of_revolution() {
+        let sphere = render::procedural::UvSphere::default().build().mesh;
+        assert_eq!(axis_of_revolution(&sphere), None);
+        assert!(!turns_show(&sphere), "a sphere turned shows its outline");
+        // A box 3 x 2 x 1, each face in 8 x 8 squares (a scan's facets, not
+        // a few large ones that some line meets by chance): a direction of
+        // spread stands out, but no surface of revolution.
+        let half = Vec3::new(1.5, 1.0, 0.5);
+        let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+        for axis in 0..3 {
+            for side in [-1.0f32, 1.0] {
+                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                let first = positions.len() as u32;
+                for i in 0..=8 {
+                    for j in 0..=8 {
+                        let mut p = Vec3::ZERO;
+                        p[axis] = side * half[axis];
+                        p[u] = half[u] * (i as f32 / 4.0 - 1.0);
+                        p[v] = half[v] * (j as f32 / 4.0 - 1.0);
+                        positions.push(p);
+                    }
+                }
+                let at = |i: u32, j: u32| first + i * 9 + j;
+                for i in 0..8 {
+                    for j in 0..8 {
+                        let quad = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                        triangles.push([quad[0], quad[1], quad[2]]);
+                        triangles.push([quad[0], quad[2], quad[3]]);
+                    }
+                }
+            }
+        }
+        let n = positions.len();
+        let cuboid = Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles);
+        assert_eq!(axis_of_revolution(&cuboid), None);
+        assert!(turns_show(&cuboid));
+        let spread = axis_of_spread(&cuboid).expect("a side that stands out");
+        assert!(spread.abs().max_element() > 0.999, "spread {spread}");
+    }
+}
