@@ -208,6 +208,38 @@ impl Pixels {
     }
 }
 
+/// The photo as the estimate works on it: box-filtered when its mask holds
+/// more pixels than the budget (`Settings::working_mask_pixels`), with the
+/// clipped pixels of what it works on.
+pub struct WorkingPhoto {
+    /// The box filter's factor (1: the photo as it is).
+    pub factor: f64,
+    /// The box-filtered photo (None: the photo as it is).
+    pub photo: Option<Photo>,
+    /// Clipped pixels of the working photo, one flag per pixel.
+    pub clipped: Vec<bool>,
+}
+
+impl WorkingPhoto {
+    /// `full` brought to a mask of about `budget` pixels (0: as it is).
+    pub fn new(full: &Photo, budget: usize) -> Result<Self> {
+        let factor = working_factor(full.mask.count(), budget);
+        let (photo, clipped) = match factor > 1.0 {
+            false => (None, clipped_pixels(full)),
+            true => {
+                let (photo, clipped) = full.downsampled(factor, &clipped_pixels(full))?;
+                (Some(photo), clipped)
+            }
+        };
+        Ok(WorkingPhoto { factor, photo, clipped })
+    }
+
+    /// The photo worked on: the box-filtered one, or `full` itself.
+    pub fn photo<'a>(&'a self, full: &'a Photo) -> &'a Photo {
+        self.photo.as_ref().unwrap_or(full)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,6 +7,7 @@
 
 use std::time::Instant;
 
+use glam::Vec3;
 use render::Result;
 use render::camera::Camera;
 use render::integrator::{LightSampling, RenderSettings};
@@ -15,11 +16,11 @@ use render::pose::Pose;
 use render::sampling::EnvSampler;
 
 use super::lighting::{
-    LEAN_SOLVE_ITERS, LightingFit, LightingPurpose, Smoothness, env_from_texels, final_spp, fit_lighting,
+    LEAN_SOLVE_ITERS, LightingFit, LightingPurpose, SOLVE_ITERS, Smoothness, env_from_texels, final_spp, fit_lighting,
     lighting_report,
 };
 use super::photo::{Photo, Pixels};
-use super::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep};
+use super::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
 use super::settings::Settings;
 use super::{Probe, hypotheses};
 
@@ -68,121 +69,424 @@ pub(super) fn line_search_max(
     Ok(tried)
 }
 
-/// The pose searches' measure of `pose`: the lighting solved there from
-/// the map `start` (of a pose near it) with MIS guided by that map
-/// ([`Settings::spp_lean`], [`LEAN_SOLVE_ITERS`], on the pixels `pixels`
-/// keeps), and its data term's weighted error in -dB (higher is better;
-/// minus infinity with no data pixel left): the weighted error, not the
-/// PSNR, which a sun's highlight dominates.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn pose_score(
-    probe: &Probe,
-    photo: &Photo,
-    pose: &Pose,
-    start: &[f64],
-    work: (usize, usize),
-    clipped: &[bool],
-    settings: &Settings,
-    pixels: Pixels,
-) -> Result<(LightingFit, f64)> {
-    let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
-    let sampling = LightSampling::mis(&sampler).with_interreflection();
-    let render = RenderSettings {
-        spp: final_spp(settings.spp_lean, photo.mask.count(), sampling.strategies()),
-        seed: settings.seed.wrapping_add(79),
-    };
-    let fit = fit_lighting(
-        probe,
-        photo,
-        pose,
-        work,
-        &render,
-        clipped,
-        Smoothness::quadratic(settings.smoothness),
-        LightingPurpose::Output,
-        pixels,
-        &sampling,
-        Some(start),
-        LEAN_SOLVE_ITERS,
-    )?;
-    let score = match fit.weighted_sq_error() {
-        error if error > 0.0 => -10.0 * error.log10(),
-        _ => f64::NEG_INFINITY,
-    };
-    Ok((fit, score))
-}
-
-/// A line search over one parameter of the pose ([`line_search_max`] in
-/// steps of `step`, up to `reach` either way; `candidate(x)` is the pose
-/// at `x`, 0 the searched one), each candidate scored by [`pose_score`]
-/// from the map `start` (`scored`: the searched pose's score and map,
-/// when they are known already). A candidate is kept only if it beats the
-/// searched pose by [`Settings::search_margin_db`]. Each candidate scored
-/// is a phase named `phase`. Returns the kept pose, its score and map, and
-/// the search's account.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn pose_line_search(
-    probe: &Probe,
-    photo: &Photo,
-    start: &[f64],
-    work: (usize, usize),
-    clipped: &[bool],
-    settings: &Settings,
-    phases: &mut PhaseLog,
-    phase: &str,
-    (step, reach): (f32, f32),
-    pixels: Pixels,
-    mut scored: Option<(f64, Vec<f64>)>,
-    candidate: impl Fn(f32) -> Pose,
-) -> Result<(Pose, (f64, Vec<f64>), LineSearchReport)> {
-    // The searched pose's map, and the best candidate's (not their transports).
-    let mut centre: Option<Vec<f64>> = None;
-    let mut best: Option<(f32, Vec<f64>, f64)> = None;
-    let tried = line_search_max(step, reach, |x| {
-        let t1 = Instant::now();
-        let pose = candidate(x);
-        let known = match x == 0.0 {
-            true => scored.take(),
-            false => None,
-        };
-        let (score, map) = match known {
-            Some(known) => known,
-            None => match pose_score(probe, photo, &pose, start, work, clipped, settings, pixels) {
-                Ok((fit, score)) => {
-                    phases.expect_more(1);
-                    phases.push(PhaseReport {
-                        pose: Some(PoseRecord::from(&pose)),
-                        ..lighting_report(phase, &fit, t1)
-                    });
-                    (score, fit.into_map())
-                }
-                // A pose that takes the probe out of the view is no candidate.
-                Err(_) if x != 0.0 => return Ok(f64::NEG_INFINITY),
-                Err(e) => return Err(e),
-            },
-        };
-        if centre.is_none() {
-            centre = Some(map.clone());
-        }
-        if best.as_ref().is_none_or(|b| score > b.2) {
-            best = Some((x, map, score));
-        }
-        Ok(score)
-    })?;
-    let (x, map, score) = best.expect("the line search scores the searched pose");
-    let (kept, kept_scored) = match score > tried[0].1 + settings.search_margin_db {
-        true => (x, (score, map)),
-        false => (0.0, (tried[0].1, centre.expect("the searched pose is scored first"))),
-    };
-    Ok((candidate(kept), kept_scored, LineSearchReport { tried, kept }))
-}
-
-/// Rounds at most of [`refine_by_photo`].
-pub(super) const PHOTO_REFINE_ROUNDS: usize = 3;
-
 /// A rival's score by the pose searches' measure and the map solved for it,
 /// with its pilot map (an error where the photo cannot show it).
-pub(super) type ScoredRival = Result<((f64, Vec<f64>), Vec<f64>)>;
+type ScoredRival = Result<((f64, Vec<f64>), Vec<f64>)>;
+
+/// What the photo's judgement of the searched pose found.
+pub(super) struct Judged {
+    /// The pose kept.
+    pub(super) pose: Pose,
+    /// Its pilot map at the search resolution (None without a pilot).
+    pub(super) pilot: Option<Vec<f64>>,
+    pub(super) rival: Option<RivalReport>,
+    pub(super) size: Option<LineSearchReport>,
+    pub(super) lean: Option<LineSearchReport>,
+    pub(super) refinement: Vec<RefinementStep>,
+}
+
+/// The pose kept so far: its pilot map (solved at `piloted`, which the
+/// line searches' moves leave behind) and its score, when known.
+struct Kept {
+    pose: Pose,
+    map: Vec<f64>,
+    piloted: Pose,
+    scored: Option<(f64, Vec<f64>)>,
+}
+
+/// Judges poses by the photo: what every photo-scored search shares.
+pub(super) struct PhotoJudge<'a> {
+    pub(super) probe: &'a Probe<'a>,
+    pub(super) photo: &'a Photo,
+    pub(super) clipped: &'a [bool],
+    /// The searches' map size.
+    pub(super) work: (usize, usize),
+    pub(super) settings: &'a Settings,
+    /// Whether the pose was searched (a known pose is only piloted).
+    pub(super) searched: bool,
+}
+
+impl PhotoJudge<'_> {
+    /// The searched `pose` and its `rivals` judged by the photo: the pilot
+    /// map; on request the size line search (ahead of the rival test,
+    /// whose rivals grow with it); the rival test; for a small probe the
+    /// refinement, else the lean line search. Nothing but the pose when
+    /// there is no pilot (`Settings::spp_pilot` 0).
+    pub(super) fn judge(
+        &self,
+        phases: &mut PhaseLog,
+        pose: Pose,
+        mut rivals: Vec<Pose>,
+        patterned: bool,
+    ) -> Result<Judged> {
+        if self.settings.spp_pilot == 0 {
+            let (pilot, rival, size, lean) = (None, None, None, None);
+            return Ok(Judged {
+                pose,
+                pilot,
+                rival,
+                size,
+                lean,
+                refinement: Vec::new(),
+            });
+        }
+        let map = self.pilot(&pose, phases)?;
+        let mut kept = Kept {
+            pose,
+            map,
+            piloted: pose,
+            scored: None,
+        };
+        let refine = self.searched && photo_refines(self.photo, self.settings);
+        let mut refinement = Vec::new();
+        // The size first, before the rival test: a mask a pixel too wide
+        // or too narrow grows or shrinks the outline's pose, and the
+        // probe's every normal with it, and the photo judges the ends
+        // and turns of a probe of the wrong size. The rivals grow as the
+        // chosen pose did.
+        let radius_px = (self.photo.mask.count() as f32 / std::f32::consts::PI).sqrt();
+        let mesh = &self.probe.asset.mesh;
+        let grown = |pose: &Pose, px: f32| hypotheses::rescaled(pose, mesh, 1.0 + px / radius_px);
+        let size_search = (self.settings.size_step_px, self.settings.size_reach_px);
+        let size = self.search(
+            phases,
+            &mut kept,
+            "lighting_size",
+            size_search,
+            Pixels::Checkerboard,
+            &grown,
+        )?;
+        kept.piloted = kept.pose;
+        if let Some(size) = &size {
+            rivals.iter_mut().for_each(|rival| *rival = grown(rival, size.kept));
+        }
+        let rival = match rivals.is_empty() {
+            true => None,
+            false => Some(self.rival_test(phases, rivals, refine, patterned, &mut kept, &mut refinement)?),
+        };
+        if refine && rival.is_none() {
+            (kept.pose, _) = self.refine(&kept.map, phases, patterned, "chosen", kept.pose, None, &mut refinement)?;
+        }
+        // The kept pose's own pilot map, if the photo moved it: the
+        // refinement's maps were solved from the map of where it began.
+        if kept.pose != kept.piloted {
+            phases.expect_more(1);
+            kept.map = self.pilot(&kept.pose, phases)?;
+            kept.scored = None;
+        }
+        // The refinement searched the lean among the rest.
+        let lean = match refine {
+            true => None,
+            false => {
+                let camera = &self.photo.camera;
+                let lean_search = (self.settings.lean_step_deg, self.settings.lean_reach_deg);
+                let leaned = |pose: &Pose, deg: f32| hypotheses::leaned(pose, mesh, camera, deg);
+                self.search(phases, &mut kept, "lighting_lean", lean_search, Pixels::All, &leaned)?
+            }
+        };
+        Ok(Judged {
+            pose: kept.pose,
+            pilot: Some(kept.map),
+            rival,
+            size,
+            lean,
+            refinement,
+        })
+    }
+
+    /// The pilot map at `pose`: solved from BRDF samples, coarse to fine,
+    /// with the output's weighting; it guides and starts the later solves.
+    fn pilot(&self, pose: &Pose, phases: &mut PhaseLog) -> Result<Vec<f64>> {
+        let t1 = Instant::now();
+        let render = RenderSettings {
+            spp: final_spp(self.settings.spp_pilot, self.photo.mask.count(), 1),
+            seed: self.settings.seed.wrapping_add(78),
+        };
+        let fit = fit_lighting(
+            self.probe,
+            self.photo,
+            pose,
+            self.work,
+            &render,
+            self.clipped,
+            Smoothness::quadratic(self.settings.smoothness),
+            LightingPurpose::Output,
+            Pixels::All,
+            &LightSampling::BSDF.with_interreflection(),
+            None,
+            SOLVE_ITERS,
+        )?;
+        phases.push(PhaseReport {
+            pose: Some(PoseRecord::from(pose)),
+            ..lighting_report("lighting_pilot", &fit, t1)
+        });
+        Ok(fit.into_map())
+    }
+
+    /// A line search over one parameter of the kept pose (`candidate(pose,
+    /// x)`), from its map and, over all pixels, its score if known; moves
+    /// `kept` to the pose the search keeps. None when the pose was not
+    /// searched or the search is off (`step` 0).
+    fn search(
+        &self,
+        phases: &mut PhaseLog,
+        kept: &mut Kept,
+        phase: &str,
+        (step, reach): (f32, f32),
+        pixels: Pixels,
+        candidate: &dyn Fn(&Pose, f32) -> Pose,
+    ) -> Result<Option<LineSearchReport>> {
+        if !self.searched || step <= 0.0 {
+            return Ok(None);
+        }
+        let from = kept.pose;
+        // The rival test's score of this pose serves a search over all
+        // pixels that starts at it.
+        let known = match pixels {
+            Pixels::All => kept.scored.take(),
+            _ => None,
+        };
+        let (pose, (_, map), report) =
+            self.line_search(&kept.map, phases, phase, (step, reach), pixels, known, |x| {
+                candidate(&from, x)
+            })?;
+        if report.kept != 0.0 {
+            kept.scored = None;
+        }
+        (kept.pose, kept.map) = (pose, map);
+        Ok(Some(report))
+    }
+
+    /// The chosen pose against its `rivals` (a symmetric probe's other end,
+    /// where the outline hardly tells them apart; a patterned probe's
+    /// close-ranked best other end and best half turn): each one's pilot
+    /// map, and the searches' score at each (each refined first when
+    /// `refine`); the best rival is kept if it beats the chosen pose by
+    /// `Settings::search_margin_db`.
+    fn rival_test(
+        &self,
+        phases: &mut PhaseLog,
+        rivals: Vec<Pose>,
+        refine: bool,
+        patterned: bool,
+        kept: &mut Kept,
+        refinement: &mut Vec<RefinementStep>,
+    ) -> Result<RivalReport> {
+        phases.expect_more(1 + 2 * rivals.len());
+        let score = |pose: &Pose, map: &[f64], phases: &mut PhaseLog| -> Result<(f64, Vec<f64>)> {
+            let t1 = Instant::now();
+            let (fit, score) = self.score(pose, map, Pixels::All)?;
+            phases.push(PhaseReport {
+                pose: Some(PoseRecord::from(pose)),
+                ..lighting_report("lighting_rival", &fit, t1)
+            });
+            Ok((score, fit.into_map()))
+        };
+        let mut chosen = score(&kept.pose, &kept.map, phases)?;
+        if refine {
+            let scored = Some(chosen);
+            (kept.pose, chosen) = self.refine(&kept.map, phases, patterned, "chosen", kept.pose, scored, refinement)?;
+        }
+        // Each rival's pilot map and score (refined as the chosen pose
+        // was); the best-scored one is the test's. A rival the photo
+        // cannot show (out of the view, no data pixel) is no rival.
+        let db = |scored: &ScoredRival| scored.as_ref().map_or(f64::NEG_INFINITY, |((db, _), _)| *db);
+        let mut strongest = None;
+        for rival_piloted in rivals {
+            let mut rival = rival_piloted;
+            let rival_scored = self.pilot(&rival, phases).and_then(|rival_map| {
+                let mut scored = score(&rival, &rival_map, phases)?;
+                if refine {
+                    let known = Some(scored);
+                    (rival, scored) = self.refine(&rival_map, phases, patterned, "rival", rival, known, refinement)?;
+                }
+                Ok((scored, rival_map))
+            });
+            if strongest
+                .as_ref()
+                .is_none_or(|(_, _, best)| db(&rival_scored) > db(best))
+            {
+                strongest = Some((rival, rival_piloted, rival_scored));
+            }
+        }
+        let (rival, rival_piloted, rival_scored) = strongest.expect("at least one rival");
+        let rival_db = db(&rival_scored);
+        let report = RivalReport {
+            rival_axis: (rival.rotation * Vec3::Y).to_array(),
+            chosen_db: chosen.0,
+            rival_db,
+            kept_rival: rival_db > chosen.0 + self.settings.search_margin_db,
+        };
+        kept.scored = Some(match rival_scored {
+            Ok((rival_score, rival_map)) if report.kept_rival => {
+                (kept.pose, kept.map, kept.piloted) = (rival, rival_map, rival_piloted);
+                rival_score
+            }
+            _ => chosen,
+        });
+        Ok(report)
+    }
+
+    /// The pose searches' measure of `pose`: the lighting solved there from
+    /// the map `start` (of a pose near it) with MIS guided by that map
+    /// ([`Settings::spp_lean`], [`LEAN_SOLVE_ITERS`], on the pixels `pixels`
+    /// keeps), and its data term's weighted error in -dB (higher is better;
+    /// minus infinity with no data pixel left): the weighted error, not the
+    /// PSNR, which a sun's highlight dominates.
+    pub(super) fn score(&self, pose: &Pose, start: &[f64], pixels: Pixels) -> Result<(LightingFit, f64)> {
+        let (settings, work) = (self.settings, self.work);
+        let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
+        let sampling = LightSampling::mis(&sampler).with_interreflection();
+        let render = RenderSettings {
+            spp: final_spp(settings.spp_lean, self.photo.mask.count(), sampling.strategies()),
+            seed: settings.seed.wrapping_add(79),
+        };
+        let fit = fit_lighting(
+            self.probe,
+            self.photo,
+            pose,
+            work,
+            &render,
+            self.clipped,
+            Smoothness::quadratic(settings.smoothness),
+            LightingPurpose::Output,
+            pixels,
+            &sampling,
+            Some(start),
+            LEAN_SOLVE_ITERS,
+        )?;
+        let score = match fit.weighted_sq_error() {
+            error if error > 0.0 => -10.0 * error.log10(),
+            _ => f64::NEG_INFINITY,
+        };
+        Ok((fit, score))
+    }
+
+    /// A line search over one parameter of the pose ([`line_search_max`] in
+    /// steps of `step`, up to `reach` either way; `candidate(x)` is the pose
+    /// at `x`, 0 the searched one), each candidate scored by
+    /// [`PhotoJudge::score`] from the map `start` (`scored`: the searched
+    /// pose's score and map, when they are known already). A candidate is
+    /// kept only if it beats the searched pose by
+    /// [`Settings::search_margin_db`]. Each candidate scored is a phase
+    /// named `phase`. Returns the kept pose, its score and map, and the
+    /// search's account.
+    #[allow(clippy::too_many_arguments)]
+    fn line_search(
+        &self,
+        start: &[f64],
+        phases: &mut PhaseLog,
+        phase: &str,
+        (step, reach): (f32, f32),
+        pixels: Pixels,
+        mut scored: Option<(f64, Vec<f64>)>,
+        candidate: impl Fn(f32) -> Pose,
+    ) -> Result<(Pose, (f64, Vec<f64>), LineSearchReport)> {
+        // The searched pose's map, and the best candidate's (not their transports).
+        let mut centre: Option<Vec<f64>> = None;
+        let mut best: Option<(f32, Vec<f64>, f64)> = None;
+        let tried = line_search_max(step, reach, |x| {
+            let t1 = Instant::now();
+            let pose = candidate(x);
+            let known = match x == 0.0 {
+                true => scored.take(),
+                false => None,
+            };
+            let (score, map) = match known {
+                Some(known) => known,
+                None => match self.score(&pose, start, pixels) {
+                    Ok((fit, score)) => {
+                        phases.expect_more(1);
+                        phases.push(PhaseReport {
+                            pose: Some(PoseRecord::from(&pose)),
+                            ..lighting_report(phase, &fit, t1)
+                        });
+                        (score, fit.into_map())
+                    }
+                    // A pose that takes the probe out of the view is no candidate.
+                    Err(_) if x != 0.0 => return Ok(f64::NEG_INFINITY),
+                    Err(e) => return Err(e),
+                },
+            };
+            if centre.is_none() {
+                centre = Some(map.clone());
+            }
+            if best.as_ref().is_none_or(|b| score > b.2) {
+                best = Some((x, map, score));
+            }
+            Ok(score)
+        })?;
+        let (x, map, score) = best.expect("the line search scores the searched pose");
+        let (kept, kept_scored) = match score > tried[0].1 + self.settings.search_margin_db {
+            true => (x, (score, map)),
+            false => (0.0, (tried[0].1, centre.expect("the searched pose is scored first"))),
+        };
+        Ok((candidate(kept), kept_scored, LineSearchReport { tried, kept }))
+    }
+
+    /// `pose` refined by the photo: line searches ([`PhotoJudge::line_search`],
+    /// phase `lighting_refine`) over the lean, the sway
+    /// ([`hypotheses::swayed`]) and, for a `patterned` probe, the turn about
+    /// its axis, each from where the one before left it, in rounds until
+    /// one keeps no move (at most [`PHOTO_REFINE_ROUNDS`]). Every
+    /// candidate's lighting is solved from `start`, the map of a pose near
+    /// it; `scored` is `pose`'s score, if known. Rounds, because the score
+    /// ripples (its samples move with the pose) and a search whose first
+    /// steps both score lower stops. Returns the pose, its score and map;
+    /// each search goes to `steps`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn refine(
+        &self,
+        start: &[f64],
+        phases: &mut PhaseLog,
+        patterned: bool,
+        candidate: &'static str,
+        pose: Pose,
+        scored: Option<(f64, Vec<f64>)>,
+        steps: &mut Vec<RefinementStep>,
+    ) -> Result<(Pose, (f64, Vec<f64>))> {
+        let settings = self.settings;
+        let (mut pose, mut scored) = (pose, scored);
+        let lean = (settings.lean_step_deg, settings.lean_reach_deg);
+        let turn = (TURN_PER_LEAN * lean.0, TURN_PER_LEAN * lean.1);
+        type Move = fn(&Pose, &Mesh, &Camera, f32) -> Pose;
+        let directions: [(&'static str, (f32, f32), Move); 3] = [
+            ("lean", lean, hypotheses::leaned),
+            ("sway", lean, hypotheses::swayed),
+            ("turn", turn, |pose, mesh, _, deg| hypotheses::turned(pose, mesh, deg)),
+        ];
+        let (mesh, camera) = (&self.probe.asset.mesh, &self.photo.camera);
+        for _ in 0..PHOTO_REFINE_ROUNDS {
+            let mut moved = false;
+            for &(direction, reach, moved_by) in &directions[..2 + patterned as usize] {
+                let from = pose;
+                let (kept, kept_scored, search) = self.line_search(
+                    start,
+                    phases,
+                    "lighting_refine",
+                    reach,
+                    Pixels::All,
+                    scored.take(),
+                    |x| moved_by(&from, mesh, camera, x),
+                )?;
+                moved |= search.kept != 0.0;
+                (pose, scored) = (kept, Some(kept_scored));
+                steps.push(RefinementStep {
+                    candidate,
+                    direction,
+                    search,
+                });
+            }
+            if !moved {
+                break;
+            }
+        }
+        Ok((pose, scored.expect("the searches score the pose")))
+    }
+}
+
+/// Rounds at most of [`PhotoJudge::refine`].
+const PHOTO_REFINE_ROUNDS: usize = 3;
 
 /// Whether the photo refines the pose search's choice and rivals
 /// (`Settings::photo_refine_px`; a lean search to refine by).
@@ -193,84 +497,12 @@ pub(super) fn photo_refines(photo: &Photo, settings: &Settings) -> bool {
 /// The turn's step and reach in a refinement, as multiples of the lean's:
 /// a turn moves the probe's surface by its radius per radian, a lean by
 /// its half length, about twice as far on a can.
-pub(super) const TURN_PER_LEAN: f32 = 2.0;
-
-/// `pose` refined by the photo: line searches ([`pose_line_search`],
-/// phase `lighting_refine`) over the lean, the sway ([`hypotheses::swayed`]) and,
-/// for a `patterned` probe, the turn about its axis, each from where the
-/// one before left it, in rounds until one keeps no move (at most
-/// [`PHOTO_REFINE_ROUNDS`]). Every candidate's lighting is solved from
-/// `start`, the map of a pose near it; `scored` is `pose`'s score, if
-/// known. Rounds, because the score ripples (its samples move with the
-/// pose) and a search whose first steps both score lower stops: the small
-/// courtyard can's right end (see `Settings::photo_refine_px`) leaned 0.12
-/// deg in the first round, its steps of 0.3 either way scoring lower, and
-/// from there 2.4 in the second, 4.1 -> 11.7 dB. (First steps of 0.6 or
-/// 1.2 deg instead, on 20 small probes: 18 and 17 poses found, against
-/// 19.) Returns the pose, its score and map; each search goes to `steps`.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn refine_by_photo(
-    probe: &Probe,
-    photo: &Photo,
-    start: &[f64],
-    work: (usize, usize),
-    clipped: &[bool],
-    settings: &Settings,
-    phases: &mut PhaseLog,
-    patterned: bool,
-    candidate: &'static str,
-    pose: Pose,
-    scored: Option<(f64, Vec<f64>)>,
-    steps: &mut Vec<RefinementStep>,
-) -> Result<(Pose, (f64, Vec<f64>))> {
-    let (mut pose, mut scored) = (pose, scored);
-    let lean = (settings.lean_step_deg, settings.lean_reach_deg);
-    let turn = (TURN_PER_LEAN * lean.0, TURN_PER_LEAN * lean.1);
-    type Move = fn(&Pose, &Mesh, &Camera, f32) -> Pose;
-    let directions: [(&'static str, (f32, f32), Move); 3] = [
-        ("lean", lean, hypotheses::leaned),
-        ("sway", lean, hypotheses::swayed),
-        ("turn", turn, |pose, mesh, _, deg| hypotheses::turned(pose, mesh, deg)),
-    ];
-    let (mesh, camera) = (&probe.asset.mesh, &photo.camera);
-    for _ in 0..PHOTO_REFINE_ROUNDS {
-        let mut moved = false;
-        for &(direction, reach, moved_by) in &directions[..2 + patterned as usize] {
-            let from = pose;
-            let (kept, kept_scored, search) = pose_line_search(
-                probe,
-                photo,
-                start,
-                work,
-                clipped,
-                settings,
-                phases,
-                "lighting_refine",
-                reach,
-                Pixels::All,
-                scored.take(),
-                |x| moved_by(&from, mesh, camera, x),
-            )?;
-            moved |= search.kept != 0.0;
-            (pose, scored) = (kept, Some(kept_scored));
-            steps.push(RefinementStep {
-                candidate,
-                direction,
-                search,
-            });
-        }
-        if !moved {
-            break;
-        }
-    }
-    Ok((pose, scored.expect("the searches score the pose")))
-}
+const TURN_PER_LEAN: f32 = 2.0;
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::estimate::Quality;
-    use crate::estimate::lighting::SOLVE_ITERS;
     use crate::estimate::testing::{photo_of, probe_of};
     use glam::{Quat, Vec3};
     use render::envmap::EnvMap;
@@ -329,22 +561,18 @@ mod tests {
             expected: 0,
             on_phase: &mut on_phase,
         };
-        let mut steps = Vec::new();
-        let (refined, (score, _)) = refine_by_photo(
-            &probe,
-            &photo,
-            &pilot,
+        let judge = PhotoJudge {
+            probe: &probe,
+            photo: &photo,
+            clipped: &clipped,
             work,
-            &clipped,
-            &settings,
-            &mut phases,
-            true,
-            "chosen",
-            start,
-            None,
-            &mut steps,
-        )
-        .expect("a refinement");
+            settings: &settings,
+            searched: true,
+        };
+        let mut steps = Vec::new();
+        let (refined, (score, _)) = judge
+            .refine(&pilot, &mut phases, true, "chosen", start, None, &mut steps)
+            .expect("a refinement");
         // The axis: 1.58 -> 0.26 deg. (The turn, 3 deg off, gains 0.17 dB
         // at most here, under the searches' margin: this photo hardly
         // shows it.)
@@ -375,21 +603,9 @@ mod tests {
         assert_eq!(score, last.tried.iter().find(|t| t.0 == last.kept).expect("kept").1);
         // A probe without a pattern is not turned.
         let mut steps = Vec::new();
-        refine_by_photo(
-            &probe,
-            &photo,
-            &pilot,
-            work,
-            &clipped,
-            &settings,
-            &mut phases,
-            false,
-            "rival",
-            start,
-            None,
-            &mut steps,
-        )
-        .expect("a refinement");
+        judge
+            .refine(&pilot, &mut phases, false, "rival", start, None, &mut steps)
+            .expect("a refinement");
         assert!(steps.iter().all(|s| s.direction != "turn" && s.candidate == "rival"));
     }
 

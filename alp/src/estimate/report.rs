@@ -241,7 +241,16 @@ pub(super) struct PhaseLog<'a> {
     pub(super) on_phase: &'a mut dyn FnMut(&PhaseReport, usize, usize),
 }
 
-impl PhaseLog<'_> {
+impl<'a> PhaseLog<'a> {
+    /// An empty log that expects `expected` phases.
+    pub(super) fn new(expected: usize, on_phase: &'a mut dyn FnMut(&PhaseReport, usize, usize)) -> Self {
+        PhaseLog {
+            phases: Vec::new(),
+            expected,
+            on_phase,
+        }
+    }
+
     pub(super) fn push(&mut self, phase: PhaseReport) {
         self.expected = self.expected.max(self.phases.len() + 1);
         (self.on_phase)(&phase, self.phases.len() + 1, self.expected);

@@ -8,7 +8,26 @@ use std::collections::BTreeMap;
 
 use glam::{DMat3, DVec3, Quat, Vec2, Vec3};
 use render::mesh::Mesh;
+use render::pose::Pose;
 use render::probe::ProbeAsset;
+
+/// The probe turned so that its axis ([`axis_to_y`]) is mesh +Y: the
+/// rotation that does it and the turned asset (None: it was built along
+/// +Y). The estimate turns the probe about +Y and reads its length along
+/// it; its poses are turned back at the end.
+pub fn along_y(asset: &ProbeAsset) -> (Quat, Option<ProbeAsset>) {
+    let to_y = axis_to_y(&asset.mesh);
+    let turned = (to_y != Quat::IDENTITY).then(|| ProbeAsset {
+        mesh: asset.mesh.posed(&Pose::new(to_y, 1.0, Vec3::ZERO)),
+        ..asset.clone()
+    });
+    (to_y, turned)
+}
+
+/// `pose` of the mesh as built, as a pose of the mesh turned by `to_y`.
+pub fn turned_to_y(pose: &Pose, to_y: Quat) -> Pose {
+    Pose::new(pose.rotation * to_y.inverse(), pose.scale, pose.translation)
+}
 
 /// Eigenvalues of the surface's spread closer than this factor are equal:
 /// no axis stands out (a sphere), or not that one.
@@ -378,7 +397,6 @@ pub(super) fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3])
 #[cfg(test)]
 mod tests {
     use super::*;
-    use render::pose::Pose;
     use render::procedural::SodaCan;
 
     #[test]

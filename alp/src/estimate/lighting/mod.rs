@@ -16,9 +16,12 @@ use autodiff::Tape;
 use glam::{Vec2, Vec3};
 use render::bsdf::GgxMetal;
 use render::envmap::{EnvMap, direction_to_uv};
+use render::image_io::RgbImage;
 use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
 use render::pose::Pose;
 use render::posed::{PoseVars, PosedMesh, pack_pose};
+use render::probe::ProbeAsset;
+use render::sampling::EnvSampler;
 use render::{RenderError, Result};
 
 pub use solve::{FLOOR_OF_LEVEL, LightingSolve, Smoothness, pyramid, resample, solve};
@@ -27,6 +30,7 @@ pub use transport::{MAX_TEXELS, Transport};
 use super::Probe;
 use super::photo::{Photo, Pixels, usable_pixel};
 use super::report::{PhaseReport, resident_mb};
+use super::settings::Settings;
 use crate::objective::{DARK_FRACTION, luminance, mask_mean_luminance};
 
 /// What a lighting fit is for.
@@ -83,6 +87,92 @@ impl LightingFit {
     pub(super) fn weighted_sq_error(&self) -> f64 {
         mean_weighted_sq_error(&self.rendered, &self.target, &self.weight)
     }
+
+    /// The re-render at the photo's size: the fit's pixels, the rest zero.
+    pub(super) fn rerender(&self) -> RgbImage {
+        let channels: [Vec<f64>; 3] = std::array::from_fn(|c| self.rendered.iter().map(|p| p[c]).collect());
+        self.hits.to_image([&channels[0], &channels[1], &channels[2]])
+    }
+}
+
+/// The env map sizes (width, height) of an estimate: the output map's solve
+/// works at `work`, which the probe's sharpest lobe sets; the pose searches
+/// at `search`, at most [`SEARCH_HEIGHT`] rows.
+pub(super) struct MapSizes {
+    /// The probe's smallest roughness, which sets `work`.
+    pub(super) min_roughness: f32,
+    pub(super) work: (usize, usize),
+    pub(super) search: (usize, usize),
+}
+
+impl MapSizes {
+    /// The sizes for `asset`, its working height given or (None) from its
+    /// roughness.
+    pub(super) fn new(asset: &ProbeAsset, working_height: Option<usize>) -> Result<Self> {
+        let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
+        let work_h = working_height.unwrap_or_else(|| self::working_height(min_roughness));
+        if work_h == 0 || 2 * work_h * work_h > MAX_TEXELS {
+            return Err(RenderError::value(
+                "working height",
+                format!(
+                    "{work_h} rows: a working map has 1 to {} rows",
+                    (MAX_TEXELS as f64 / 2.0).sqrt() as usize
+                ),
+            ));
+        }
+        let search_h = work_h.min(SEARCH_HEIGHT);
+        Ok(MapSizes {
+            min_roughness,
+            work: (2 * work_h, work_h),
+            search: (2 * search_h, search_h),
+        })
+    }
+}
+
+/// The output map's fit at `pose`: at `Settings::spp_final`, with MIS guided
+/// by the `pilot` map (search size) and started from it, with the final
+/// smoothness. The transport follows one bounce of inter-reflection (a
+/// can's lid sees its rim, which reflects the sky). Returns the fit and its
+/// samples per pixel.
+pub(super) fn final_fit(
+    probe: &Probe,
+    photo: &Photo,
+    clipped: &[bool],
+    pose: &Pose,
+    pilot: Option<&[f64]>,
+    sizes: &MapSizes,
+    settings: &Settings,
+) -> Result<(LightingFit, u32)> {
+    let search = sizes.search;
+    let sampler = pilot
+        .map(|texels| env_from_texels(texels, search.0, search.1).map(|map| EnvSampler::new(&map)))
+        .transpose()?;
+    let start = pilot.map(|texels| resample(texels, search, sizes.work));
+    let sampling = match &sampler {
+        Some(sampler) => LightSampling::mis(sampler),
+        None => LightSampling::BSDF,
+    }
+    .with_interreflection();
+    let spp = final_spp(settings.spp_final, photo.mask.count(), sampling.strategies());
+    let render = RenderSettings {
+        spp,
+        seed: settings.seed.wrapping_add(77),
+    };
+    let fit = fit_lighting(
+        probe,
+        photo,
+        pose,
+        sizes.work,
+        &render,
+        clipped,
+        settings.final_smoothness,
+        LightingPurpose::Output,
+        Pixels::All,
+        &sampling,
+        start.as_deref(),
+        SOLVE_ITERS,
+    )?;
+    Ok((fit, spp))
 }
 
 #[allow(clippy::too_many_arguments)]
