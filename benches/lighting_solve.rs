@@ -31,7 +31,7 @@ fn main() {
         for spp in [32, 128] {
             eprintln!("lighting_solve spp={spp} threads={threads}");
             let mut settings = Settings::new(Quality::Default);
-            settings.spp_final = spp;
+            settings.lighting.spp_final = spp;
             settings.known_pose = Some(pose);
             let mut times = Vec::new();
             let mut last = None;

@@ -1,7 +1,7 @@
 //! The main job end to end on a small synthetic photo: it must find the
 //! probe where it is and explain the photo; bad inputs are clear errors.
 
-use alp::estimate::{FINAL_SAMPLE_BUDGET, Photo, Quality, Settings, estimate, final_spp};
+use alp::estimate::{Photo, Quality, Settings, estimate};
 use glam::{Quat, Vec3};
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
@@ -150,7 +150,7 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_is_turned_the_right_way_up_by_the_phot
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
     // The lean search starts from the kept end's score.
-    settings.lean_step_deg = 0.3;
+    settings.pose_search.lean_step_deg = 0.3;
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     let report = &result.report;
     let ends = report.rival.as_ref().expect("a symmetric probe's ends are tested");
@@ -172,7 +172,7 @@ fn the_size_search_goes_ahead_of_the_rival_test_and_the_rival_grows_with_the_cho
     let (probe, truth, photo) = cap_with_a_mask_a_pixel_too_narrow();
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
-    (settings.size_step_px, settings.lean_step_deg) = (0.5, 0.3);
+    (settings.pose_search.size_step_px, settings.pose_search.lean_step_deg) = (0.5, 0.3);
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     let report = &result.report;
     let size = report.size.as_ref().expect("a size search");
@@ -208,6 +208,8 @@ fn the_final_solve_keeps_to_its_sample_budget() {
     // The suite's largest probe keeps the settings' samples; a probe
     // filling a 12-megapixel photo gets what the budget allows, and never
     // less than one pass. With MIS each hit has two light samples.
+    let lighting = Settings::default().lighting;
+    let final_spp = |spp, pixels, strategies| lighting.final_spp(spp, pixels, strategies);
     assert_eq!(final_spp(128, 51_000, 1), 128);
     assert_eq!(final_spp(64, 51_000, 2), 64);
     for strategies in [1, 2] {
@@ -215,7 +217,7 @@ fn the_final_solve_keeps_to_its_sample_budget() {
             let spp = final_spp(128, pixels, strategies);
             assert!(spp >= 16, "{pixels} pixels: {spp} spp");
             assert!(
-                spp == 16 || spp as usize * pixels * strategies <= FINAL_SAMPLE_BUDGET,
+                spp == 16 || spp as usize * pixels * strategies <= lighting.final_sample_budget,
                 "{pixels} pixels: {spp} spp"
             );
         }
@@ -258,10 +260,9 @@ fn bad_settings_are_clear_errors() {
     });
     assert!(err.contains("100x30 is not a 2:1 map"), "{err}");
     for rows in [0, 182] {
-        let err = refused(&Settings {
-            working_height: Some(rows),
-            ..settings.clone()
-        });
+        let mut bad = settings.clone();
+        bad.lighting.working_height = Some(rows);
+        let err = refused(&bad);
         assert!(
             err.contains(&format!("{rows} rows")) && err.contains("1 to 181"),
             "{err}"
@@ -276,7 +277,7 @@ fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     assert_eq!(result.pose, truth, "a known pose is kept");
     assert_eq!(
-        result.report.final_spp, settings.spp_final,
+        result.report.final_spp, settings.lighting.spp_final,
         "a small probe takes every sample"
     );
     assert_eq!(result.report.chosen_start, None);
@@ -297,7 +298,7 @@ fn a_sharp_probe_s_map_is_solved_finer_than_its_pose_searches_maps() {
     let photo = photo_of(&probe, &truth, Vec3::new(0.0, 0.12, 0.3), Vec3::new(0.0, 0.06, 0.0));
     let mut settings = Settings::new(Quality::Default);
     settings.known_pose = Some(truth);
-    settings.spp_final = 16;
+    settings.lighting.spp_final = 16;
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     // The final solve starts from the pilot map, solved at the searches' resolution.
     assert_eq!(result.report.working_resolution, (256, 128));
@@ -309,14 +310,22 @@ fn a_sharp_probe_s_map_is_solved_finer_than_its_pose_searches_maps() {
 #[test]
 fn the_size_and_lean_searches_account_for_every_candidate_and_keep_the_best_only_by_their_margin() {
     let (probe, _, photo, mut settings) = scene();
-    (settings.size_step_px, settings.lean_step_deg) = (0.5, 0.3);
+    (settings.pose_search.size_step_px, settings.pose_search.lean_step_deg) = (0.5, 0.3);
     // A probe this small would have its pose refined by the photo instead
     // of the lean search alone (next test).
-    settings.photo_refine_px = 0;
+    settings.pose_search.photo_refine_px = 0;
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     let searches = [
-        ("lighting_size", result.report.size.as_ref(), settings.size_reach_px),
-        ("lighting_lean", result.report.lean.as_ref(), settings.lean_reach_deg),
+        (
+            "lighting_size",
+            result.report.size.as_ref(),
+            settings.pose_search.size_reach_px,
+        ),
+        (
+            "lighting_lean",
+            result.report.lean.as_ref(),
+            settings.pose_search.lean_reach_deg,
+        ),
     ];
     for (phase, search, reach) in searches {
         let search = search.unwrap_or_else(|| panic!("{phase}: a search"));
@@ -325,7 +334,7 @@ fn the_size_and_lean_searches_account_for_every_candidate_and_keep_the_best_only
         assert!(tried.len() >= 3, "{phase}: {tried:?}");
         assert!(tried.iter().all(|t| t.0.abs() <= reach), "{phase}: {tried:?}");
         let best = tried.iter().fold(tried[0], |b, &t| if t.1 > b.1 { t } else { b });
-        match best.1 > tried[0].1 + settings.search_margin_db {
+        match best.1 > tried[0].1 + settings.pose_search.search_margin_db {
             true => assert_eq!(search.kept, best.0, "{phase}: {tried:?}"),
             false => assert_eq!(search.kept, 0.0, "{phase}: {tried:?}"),
         }
@@ -343,9 +352,9 @@ fn the_size_and_lean_searches_account_for_every_candidate_and_keep_the_best_only
 #[test]
 fn a_small_probe_s_pose_is_refined_by_the_photo_in_place_of_the_lean_search() {
     let (probe, truth, photo, mut settings) = scene();
-    settings.lean_step_deg = 0.3;
+    settings.pose_search.lean_step_deg = 0.3;
     assert!(
-        photo.mask.count() <= settings.photo_refine_px,
+        photo.mask.count() <= settings.pose_search.photo_refine_px,
         "{} px",
         photo.mask.count()
     );
@@ -386,13 +395,13 @@ fn a_photo_whose_mask_outgrows_the_budget_is_worked_on_box_filtered_and_re_rende
     let (probe, truth, photo, mut settings) = scene();
     // A budget a third of the mask: the photo is worked on at about
     // 1 / sqrt(3) of its size.
-    settings.working_mask_pixels = photo.mask.count().div_ceil(3);
+    settings.photo.working_mask_pixels = photo.mask.count().div_ceil(3);
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     let working = &result.report.working_image;
-    let factor = (photo.mask.count() as f64 / settings.working_mask_pixels as f64).sqrt();
+    let factor = (photo.mask.count() as f64 / settings.photo.working_mask_pixels as f64).sqrt();
     assert!((working.factor - factor).abs() < 1e-12, "{working:?}");
     assert_eq!(working.size, ((160.0 / factor) as usize, (120.0 / factor) as usize));
-    let budget = settings.working_mask_pixels as f64;
+    let budget = settings.photo.working_mask_pixels as f64;
     assert!(
         (working.mask_pixels as f64 - budget).abs() < 0.1 * budget,
         "{working:?}"

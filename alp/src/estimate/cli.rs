@@ -95,10 +95,10 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     settings.seed = args.seed;
     settings.env_size = parse_size(&args.env_size)?;
     if let Some(rounds) = args.rounds {
-        settings.rounds = rounds;
+        settings.joint.rounds = rounds;
     }
     if args.size_search {
-        settings.size_step_px = 0.5;
+        settings.pose_search.size_step_px = 0.5;
     }
     if args.threads == Some(0) {
         return Err(RenderError::value("--threads", "needs at least one thread"));

@@ -13,6 +13,8 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 use render::{RenderError, Result};
 
+use super::settings::HypothesisSettings;
+
 /// The canonical front-facing orientation for `camera`: the probe standing
 /// upright in the world (mesh +Y along the camera's `up`, which FORMATS.md
 /// gives in world coordinates) and turned to face the camera.
@@ -102,12 +104,6 @@ impl MaskShape {
     }
 }
 
-/// Directions closer than this (degrees) are one axis hypothesis.
-pub(super) const SAME_AXIS_DEG: f32 = 15.0;
-
-/// A mask rounder than this (spread ratio) shows no principal direction.
-pub(super) const ROUND_MASK: f32 = 1.15;
-
 /// Where the probe's axis (mesh +Y) may point in the world, from what the
 /// mask shows and the probe's proportions: upright (along the camera's
 /// `up`); for an elongated mask, along the image direction the axis shows
@@ -119,9 +115,15 @@ pub(super) const ROUND_MASK: f32 = 1.15;
 /// border cuts, all of these, along both of its directions. Upright is both ways too
 /// unless `top_known` (mesh +Y is the probe's top, as a probe standing on
 /// its -Y end is built; not so for one whose axis [`axis_to_y`] turned to
-/// +Y, whose ends are anyone's guess). Hypotheses within `SAME_AXIS_DEG`
+/// +Y, whose ends are anyone's guess). Hypotheses within `HypothesisSettings::same_axis_deg`
 /// (15) degrees of an earlier one are left out.
-pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_known: bool) -> Vec<Vec3> {
+pub fn axis_hypotheses(
+    camera: &Camera,
+    shape: &MaskShape,
+    mesh: &Mesh,
+    top_known: bool,
+    h: &HypothesisSettings,
+) -> Vec<Vec3> {
     let up = camera.up.normalize();
     let ray = camera.direction_through(shape.barycenter);
     let mut candidates = match top_known {
@@ -131,7 +133,7 @@ pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_know
     let (lo, hi) = mesh.bounds();
     let (length, width) = (hi.y - lo.y, (hi.x - lo.x).max(hi.z - lo.z));
     let across = Vec2::new(-shape.principal.y, shape.principal.x);
-    let round = shape.elongation <= ROUND_MASK;
+    let round = shape.elongation <= h.round_mask;
     // A mask the image's border cuts shows neither the probe's proportions
     // nor whether it is round: every direction is tried.
     let cut = shape.cut_lo.iter().chain(&shape.cut_hi).any(|&c| c);
@@ -139,9 +141,9 @@ pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_know
         vec![shape.principal, across]
     } else if round {
         vec![]
-    } else if length > ROUND_MASK * width {
+    } else if length > h.round_mask * width {
         vec![shape.principal]
-    } else if width > ROUND_MASK * length {
+    } else if width > h.round_mask * length {
         vec![across]
     } else {
         vec![shape.principal, across]
@@ -160,7 +162,7 @@ pub fn axis_hypotheses(camera: &Camera, shape: &MaskShape, mesh: &Mesh, top_know
     if round || cut {
         candidates.extend([-ray, ray]);
     }
-    let cos_same = SAME_AXIS_DEG.to_radians().cos();
+    let cos_same = h.same_axis_deg.to_radians().cos();
     let mut axes: Vec<Vec3> = Vec::new();
     for c in candidates {
         if c.is_finite() && axes.iter().all(|a| a.dot(c) < cos_same) {
@@ -222,14 +224,6 @@ pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3)
     Pose::new(rotation, 1.0, translation)
 }
 
-/// An axis leaning towards or away from the camera by less than this
-/// (degrees) is about its own mirror twin; its twins lean by
-/// [`TWIN_LEAN_DEG`] either way instead.
-pub(super) const UPRIGHT_LEAN_DEG: f32 = 5.0;
-
-/// The lean (degrees) of the twins of an axis that barely leans.
-pub(super) const TWIN_LEAN_DEG: f32 = 10.0;
-
 /// The poses whose outline is about that of `pose`, with the probe's
 /// centre in place: its axis mirrored through the plane across the view
 /// ray (an axis leaning towards the camera and one leaning as far away
@@ -239,14 +233,14 @@ pub(super) const TWIN_LEAN_DEG: f32 = 10.0;
 /// whichever of them is nearest its start, or, between two mirror images,
 /// on the saddle where the axis crosses the view ray square (the cap of
 /// tests/estimate.rs, 10 deg from square, stopped there 5.3 deg off its
-/// axis): the twins of an axis within [`UPRIGHT_LEAN_DEG`] of square lean
-/// [`TWIN_LEAN_DEG`] towards and away from the camera, each also end for
+/// axis): the twins of an axis within `HypothesisSettings::upright_lean_deg` of square lean
+/// `HypothesisSettings::twin_lean_deg` towards and away from the camera, each also end for
 /// end.
-pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Vec<Pose> {
+pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera, h: &HypothesisSettings) -> Vec<Pose> {
     let (axis, view, tip) = lean_frame(pose, mesh, camera);
     let lean = axis.dot(view).clamp(-1.0, 1.0).asin();
-    let leans = match lean.abs() < UPRIGHT_LEAN_DEG.to_radians() {
-        true => vec![TWIN_LEAN_DEG.to_radians(), -TWIN_LEAN_DEG.to_radians()],
+    let leans = match lean.abs() < h.upright_lean_deg.to_radians() {
+        true => vec![h.twin_lean_deg.to_radians(), -h.twin_lean_deg.to_radians()],
         false => vec![-lean],
     };
     let end_for_end = |rotation: Quat| rotation * Quat::from_rotation_x(std::f32::consts::PI);
@@ -358,6 +352,12 @@ pub fn turned(pose: &Pose, mesh: &Mesh, yaw_deg: f32) -> Pose {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimate::Settings;
+
+    /// The default settings.
+    fn h() -> HypothesisSettings {
+        Settings::default().hypotheses
+    }
     use render::bsdf::GgxMetal;
     use render::envmap::EnvMap;
     use render::integrator::{RenderSettings, render_image};
@@ -438,7 +438,7 @@ mod tests {
             );
             // A cut mask shows no proportions: the can lying across the
             // image is tried too, though its mask stands taller than wide.
-            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, true);
+            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, true, &h());
             assert!(
                 axes.iter().any(|a| a.x.abs() > 0.97),
                 "cut at the {cut}: no axis across the image among {axes:?}"
@@ -474,7 +474,7 @@ mod tests {
             // its top is not known (the upside-down twins of the upright
             // hypothesis cover it otherwise).
             let top_known = name != "standing on its top";
-            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, top_known);
+            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, top_known, &h());
             let true_axis = rotation * Vec3::Y;
             let best = axes
                 .iter()
@@ -511,7 +511,7 @@ mod tests {
     fn the_outline_twins_lean_as_far_the_other_way_or_turn_end_for_end_and_show_the_same_outline() {
         // Leaning 20 degrees towards the camera (+z).
         let (probe, camera, centre, pose) = can_leaning(20.0);
-        let twins = outline_twins(&pose, &probe.mesh, &camera);
+        let twins = outline_twins(&pose, &probe.mesh, &camera, &h());
         let wants = [-(lean(20.0) * Vec3::Y), lean(-20.0) * Vec3::Y, -(lean(-20.0) * Vec3::Y)];
         assert_eq!(twins.len(), wants.len());
         let outline = |pose: &Pose| can_mask(&probe, &camera, pose).inside;
@@ -534,7 +534,7 @@ mod tests {
         // +x by a positive angle tips the top towards it), each also end
         // for end.
         let (probe, camera, _, pose) = can_leaning(2.0);
-        let axes: Vec<Vec3> = outline_twins(&pose, &probe.mesh, &camera)
+        let axes: Vec<Vec3> = outline_twins(&pose, &probe.mesh, &camera, &h())
             .iter()
             .map(|twin| twin.rotation * Vec3::Y)
             .collect();

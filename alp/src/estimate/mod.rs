@@ -42,10 +42,12 @@ use render::probe::ProbeAsset;
 use render::silhouette::ReferenceMask;
 use render::{RenderError, Result};
 
-pub use lighting::{FINAL_SAMPLE_BUDGET, SEARCH_HEIGHT, final_spp, working_height};
+pub use lighting::working_height;
 pub use photo::{Photo, WorkingPhoto, mask_on_border, working_factor};
 pub use report::{Estimate, PhaseReport, Report};
 pub use settings::{Quality, Settings};
+
+use settings::SymmetrySettings;
 
 use lighting::{MapSizes, env_from_texels, final_fit, lighting_report, output_map};
 use orientation::search_pose;
@@ -69,13 +71,13 @@ pub(super) struct Probe<'a> {
 impl<'a> Probe<'a> {
     /// `asset` (its axis along mesh +Y) prepared; `top_known`: it was built
     /// along +Y, so +Y is its top.
-    pub(super) fn new(asset: &'a ProbeAsset, top_known: bool) -> Self {
+    pub(super) fn new(asset: &'a ProbeAsset, top_known: bool, symmetry: &SymmetrySettings) -> Self {
         Probe {
             asset,
             edges: EdgeAdjacency::new(&asset.mesh),
             top_known,
-            turns_show: symmetry::turns_show(&asset.mesh),
-            alike_turned: symmetry::looks_alike_turned(asset),
+            turns_show: symmetry::turns_show(&asset.mesh, symmetry),
+            alike_turned: symmetry::looks_alike_turned(asset, symmetry),
         }
     }
 }
@@ -102,16 +104,16 @@ pub fn estimate_with_progress(
         return Err(RenderError::value("env size", format!("{w}x{h} is not a 2:1 map")));
     }
     // The probe, its axis turned to mesh +Y (the search turns it about +Y).
-    let (to_y, along_y) = symmetry::along_y(asset);
+    let (to_y, along_y) = symmetry::along_y(asset, &settings.symmetry);
     let asset = along_y.as_ref().unwrap_or(asset);
     let known_pose = settings.known_pose.map(|pose| symmetry::turned_to_y(&pose, to_y));
-    let probe = Probe::new(asset, along_y.is_none());
+    let probe = Probe::new(asset, along_y.is_none(), &settings.symmetry);
     // The photo as the estimate works on it.
     let full = photo;
-    let working = WorkingPhoto::new(full, settings.working_mask_pixels)?;
+    let working = WorkingPhoto::new(full, &settings.photo)?;
     let (photo, clipped) = (working.photo(full), &working.clipped);
     let reference = ReferenceMask::new(&photo.mask)?;
-    let sizes = MapSizes::new(asset, settings.working_height)?;
+    let sizes = MapSizes::new(asset, &settings.lighting)?;
     let mut phases = PhaseLog::new(settings.phase_count(), on_phase);
     // The orientation search, from the outline and the colours.
     let searched = match known_pose {
@@ -164,7 +166,7 @@ pub fn estimate_with_progress(
             let map = env_from_texels(&fit.env, sizes.work.0, sizes.work.1)?;
             drop(fit);
             let render = RenderSettings {
-                spp: RERENDER_SPP,
+                spp: settings.photo.rerender_spp,
                 seed: settings.seed.wrapping_add(80),
             };
             render_image(asset, &judged.pose, &full.camera, &map, &GgxMetal, &render).0
@@ -213,10 +215,6 @@ pub fn estimate_with_progress(
     })
 }
 
-/// Samples per pixel of the re-render at the photo's size when the
-/// estimate worked on a box-filtered photo.
-const RERENDER_SPP: u32 = 8;
-
 /// What the stages' tests share.
 #[cfg(test)]
 mod testing {
@@ -232,7 +230,7 @@ mod testing {
             edges: EdgeAdjacency::new(&asset.mesh),
             top_known: true,
             turns_show: false,
-            alike_turned: symmetry::looks_alike_turned(asset),
+            alike_turned: symmetry::looks_alike_turned(asset, &Settings::default().symmetry),
         }
     }
 

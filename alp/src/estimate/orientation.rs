@@ -18,15 +18,14 @@ use render::silhouette::ReferenceMask;
 use render::{RenderError, Result};
 
 use super::lighting::{
-    LightingFit, LightingPurpose, SOLVE_ITERS, Smoothness, env_from_texels, fit_lighting, lighting_report,
+    FitRequest, LightingFit, LightingPurpose, Smoothness, env_from_texels, fit_lighting, lighting_report,
 };
 use super::photo::{Photo, Pixels};
-use super::ranking::{RANKING_SIZE, YAW_REFINE_DEG, best_ranked, mean_rgb_angle_deg, renders_alike, rival_starts};
+use super::ranking::{best_ranked, mean_rgb_angle_deg, renders_alike, rival_starts};
 use super::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
 use super::settings::Settings;
 use super::silhouette::{
-    PoseContext, PoseSteps, SILHOUETTE_PROGRESS, fit_pose_to_image, fit_silhouette, polish_silhouette,
-    refit_silhouette, silhouette_loss,
+    PoseContext, PoseSteps, fit_pose_to_image, fit_silhouette, polish_silhouette, refit_silhouette, silhouette_loss,
 };
 use super::{Probe, hypotheses};
 use crate::objective::mask_mean_luminance;
@@ -37,7 +36,7 @@ pub(super) struct PoseSearch {
     pub(super) pose: Pose,
     /// The chosen pose's rivals, which the photo judges: for a probe
     /// symmetric about its axis, the other end's best outline fit, if it
-    /// fits within [`RIVAL_END_RATIO`]; for one with a pattern, see
+    /// fits within `OrientationSettings::rival_end_ratio`; for one with a pattern, see
     /// [`rival_starts`].
     pub(super) rivals: Vec<Pose>,
     pub(super) axes: Vec<AxisReport>,
@@ -70,30 +69,6 @@ pub(super) fn record(
     Ok(())
 }
 
-/// Axis hypotheses whose silhouette loss is within this factor of the best
-/// one's are ranked by colour: the silhouette tells a lying probe from a
-/// standing one, not always which end is up.
-pub(super) const AXIS_KEEP_RATIO: f64 = 1.5;
-
-/// The turns (degrees, about the axis) at which each axis hypothesis of a
-/// probe whose outline a turn changes is fitted.
-pub(super) const AXIS_FIT_TURNS_DEG: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
-
-/// Fitted axes closer than this (degrees) are the same: the worse one goes.
-pub(super) const SAME_FITTED_AXIS_DEG: f32 = 5.0;
-
-/// A turn whose silhouette loss exceeds the unturned pose's by this factor
-/// changes the silhouette (a probe not symmetric about its axis) and is refitted.
-pub(super) const TURN_REFIT_RATIO: f64 = 1.2;
-
-/// A symmetric probe's other end is a rival to the chosen one while its
-/// silhouette loss is within this factor of the chosen's. The two ends'
-/// outlines differ little, and a pixel of mask error turns their order
-/// (on the suite's 9 caps the wrong end's loss was 1.03 to 1.30 times the
-/// right one's with exact masks; with a mask a pixel too narrow, the right
-/// end's was up to 1.67 times the wrong one's).
-pub(super) const RIVAL_END_RATIO: f64 = 2.0;
-
 /// The pose search (see the module's description): axis hypotheses by
 /// silhouette, their turns ranked by re-rendering colour error, then
 /// alternation of pose and lighting from the best start.
@@ -114,8 +89,10 @@ pub(super) fn search_pose(
         front_facing: hypotheses::front_facing(&photo.camera),
         clipped,
         level: mask_mean_luminance(&photo.image, &photo.mask)?,
+        outline: &settings.outline,
     };
-    if settings.starts_deg.is_empty() {
+    let o = &settings.orientation;
+    if o.starts_deg.is_empty() {
         return Err(RenderError::value("starts", "at least one orientation start is needed"));
     }
     // The objective's smoothness weight (applied by the linear solve) while
@@ -123,18 +100,18 @@ pub(super) fn search_pose(
     // away (texture baked into the light) and hide the pose error from the
     // image loss. The final solve uses the settings' (weaker) smoothness.
     let search_smoothness = settings.objective.smoothness_weight(1.0).unwrap_or(0.0);
-    let quick = RenderSettings {
-        spp: settings.spp_pose,
+    let ranking_render = RenderSettings {
+        spp: o.ranking_spp,
         seed: settings.seed,
     };
     let mesh = &probe.asset.mesh;
     let shape = hypotheses::MaskShape::new(&photo.mask)?;
-    let hypotheses = hypotheses::axis_hypotheses(&photo.camera, &shape, mesh, probe.top_known);
+    let hypotheses = hypotheses::axis_hypotheses(&photo.camera, &shape, mesh, probe.top_known, &settings.hypotheses);
     // A probe whose outline a turn changes (a mug's handle) fits each axis
     // at several turns, the best kept: a fit from one turn pulls the axis
     // after a handle where the photo shows none.
     let turns: &[f32] = match probe.turns_show {
-        true => &AXIS_FIT_TURNS_DEG,
+        true => &o.axis_fit_turns_deg,
         false => &[0.0],
     };
     phases.expect_more(hypotheses.len() * turns.len() - 1);
@@ -152,12 +129,12 @@ pub(super) fn search_pose(
             })
         })
         .map(|start| {
-            let progress = 0.0..SILHOUETTE_PROGRESS;
+            let progress = 0.0..settings.outline.progress;
             fit_silhouette(
                 &ctx,
                 "silhouette",
                 start,
-                (settings.silhouette_iters, PoseSteps::Full),
+                (settings.outline.iters, PoseSteps::Full),
                 progress,
                 settings.seed,
             )
@@ -191,13 +168,13 @@ pub(super) fn search_pose(
     // its start: the outline twins of each axis whose outline fits
     // (`hypotheses::outline_twins`) are hypotheses too, fitted likewise.
     let best_fit = axis_poses.iter().map(|(_, loss)| *loss).fold(f64::INFINITY, f64::min);
-    let cos_same = SAME_FITTED_AXIS_DEG.to_radians().cos();
+    let cos_same = o.same_fitted_axis_deg.to_radians().cos();
     let mut twins: Vec<(usize, Pose)> = Vec::new();
     for (a, (pose, loss)) in axis_poses.iter().enumerate() {
-        if *loss > AXIS_KEEP_RATIO * best_fit {
+        if *loss > o.axis_keep_ratio * best_fit {
             continue;
         }
-        for twin in hypotheses::outline_twins(pose, mesh, &photo.camera) {
+        for twin in hypotheses::outline_twins(pose, mesh, &photo.camera, &settings.hypotheses) {
             let axis = twin.rotation * Vec3::Y;
             let distinct = axis_poses
                 .iter()
@@ -229,27 +206,26 @@ pub(super) fn search_pose(
     let mut order: Vec<usize> = (0..axes.len()).collect();
     order.sort_by(|&a, &b| axes[a].silhouette_loss.total_cmp(&axes[b].silhouette_loss));
     let best_loss = axes[order[0]].silhouette_loss;
-    let cos_same = SAME_FITTED_AXIS_DEG.to_radians().cos();
+    let cos_same = o.same_fitted_axis_deg.to_radians().cos();
     let mut kept: Vec<usize> = Vec::new();
     for &a in &order {
         let axis = Vec3::from_array(axes[a].fitted_axis);
         let distinct = kept
             .iter()
             .all(|&k| Vec3::from_array(axes[k].fitted_axis).dot(axis) < cos_same);
-        if kept.len() < settings.axes_kept.max(1) && axes[a].silhouette_loss <= AXIS_KEEP_RATIO * best_loss && distinct
-        {
+        if kept.len() < o.axes_kept.max(1) && axes[a].silhouette_loss <= o.axis_keep_ratio * best_loss && distinct {
             kept.push(a);
         }
     }
     kept.iter().for_each(|&k| axes[k].kept = true);
-    phases.expect_more((kept.len() - 1) * settings.starts_deg.len());
+    phases.expect_more((kept.len() - 1) * o.starts_deg.len());
     // One start: the turned pose, refitted to the silhouette if the turn
     // changed it, then ranked.
     let rank_turn = |a: usize, yaw: f32, refinement: bool| -> Result<RankedStart> {
         let (axis_pose, axis_loss) = axis_poses[a];
         let turned = hypotheses::turned(&axis_pose, mesh, yaw);
         let loss = silhouette_loss(&ctx, &turned, settings.seed)?;
-        let (pose, loss, refit) = if loss > TURN_REFIT_RATIO * axis_loss {
+        let (pose, loss, refit) = if loss > o.turn_refit_ratio * axis_loss {
             let (pose, loss, report) = refit_silhouette(&ctx, "silhouette_turn", turned, settings)?;
             (pose, loss, Some(report))
         } else {
@@ -262,16 +238,19 @@ pub(super) fn search_pose(
         let coarse = fit_lighting(
             probe,
             photo,
-            &pose,
-            RANKING_SIZE,
-            &quick,
             clipped,
-            Smoothness::quadratic(1.0),
-            LightingPurpose::Search,
-            Pixels::All,
-            &LightSampling::BSDF,
-            None,
-            SOLVE_ITERS,
+            &pose,
+            &FitRequest {
+                size: o.ranking_size,
+                render: ranking_render,
+                sampling: LightSampling::BSDF,
+                smoothness: Smoothness::quadratic(o.ranking_smoothness),
+                purpose: LightingPurpose::Search,
+                pixels: Pixels::All,
+                start: None,
+                max_iters: settings.lighting.solve_iters,
+            },
+            &settings.lighting,
         )?;
         let ranking = lighting_report("lighting_ranking", &coarse, t1);
         let account = StartReport {
@@ -292,8 +271,8 @@ pub(super) fn search_pose(
     // at every turn: its asset tells, or else two turns of the first axis
     // do, and then one turn per axis is all there is to rank, and no yaw to
     // refine.
-    let tells = settings.starts_deg.len().min(2);
-    let first: Vec<(usize, f32)> = settings.starts_deg[..tells].iter().map(|&yaw| (kept[0], yaw)).collect();
+    let tells = o.starts_deg.len().min(2);
+    let first: Vec<(usize, f32)> = o.starts_deg[..tells].iter().map(|&yaw| (kept[0], yaw)).collect();
     record(
         first.par_iter().map(|&(a, yaw)| rank_turn(a, yaw, false)).collect(),
         phases,
@@ -302,7 +281,7 @@ pub(super) fn search_pose(
     )?;
     let symmetric = match probe.alike_turned {
         Some(alike) => alike,
-        None => tells == 2 && renders_alike(&starts[0], &starts[1]),
+        None => tells == 2 && renders_alike(&starts[0], &starts[1], o),
     };
     let rest: Vec<(usize, f32)> = kept
         .iter()
@@ -310,14 +289,14 @@ pub(super) fn search_pose(
         .flat_map(|(k, &a)| {
             let yaws = match (k, symmetric) {
                 (0, true) => &[][..],
-                (0, false) => &settings.starts_deg[tells..],
-                (_, true) => &settings.starts_deg[..1],
-                (_, false) => &settings.starts_deg[..],
+                (0, false) => &o.starts_deg[tells..],
+                (_, true) => &o.starts_deg[..1],
+                (_, false) => &o.starts_deg[..],
             };
             yaws.iter().map(move |&yaw| (a, yaw))
         })
         .collect();
-    phases.expect_fewer(kept.len() * settings.starts_deg.len() - first.len() - rest.len());
+    phases.expect_fewer(kept.len() * o.starts_deg.len() - first.len() - rest.len());
     record(
         rest.par_iter().map(|&(a, yaw)| rank_turn(a, yaw, false)).collect(),
         phases,
@@ -328,11 +307,11 @@ pub(super) fn search_pose(
     // coarse grid; the image loss alone pulls a turn in only slowly).
     let first_step = match symmetric {
         true => 0.0,
-        false => 180.0 / settings.starts_deg.len() as f32,
+        false => 180.0 / o.starts_deg.len() as f32,
     };
     let mut refine = |mut best: usize, starts: &mut Vec<StartReport>, candidates: &mut Vec<Pose>| -> Result<usize> {
         let mut step = first_step;
-        while step >= YAW_REFINE_DEG {
+        while step >= o.yaw_refine_deg {
             let (a, yaw) = (starts[best].axis, starts[best].yaw_deg);
             phases.expect_more(2);
             let ranked = [yaw - step, yaw + step]
@@ -341,7 +320,7 @@ pub(super) fn search_pose(
                 .collect();
             let tried = starts.len();
             record(ranked, phases, starts, candidates)?;
-            best = best_ranked(starts, std::iter::once(best).chain(tried..starts.len()), symmetric).unwrap_or(best);
+            best = best_ranked(starts, std::iter::once(best).chain(tried..starts.len()), symmetric, o).unwrap_or(best);
             step *= 0.5;
         }
         Ok(best)
@@ -355,14 +334,14 @@ pub(super) fn search_pose(
     // the lying courtyard cap the two ends' silhouette losses are 1.6 %
     // apart (38 % under SoftRas, whose limb bias made much of it), and the
     // suite's default run took the right end, its fast run the wrong one.
-    let best = best_ranked(&starts, 0..starts.len(), symmetric).expect("at least one start");
+    let best = best_ranked(&starts, 0..starts.len(), symmetric, o).expect("at least one start");
     let chosen = refine(best, &mut starts, &mut candidates)?;
     let axis = candidates[chosen].rotation * Vec3::Y;
     let rivals = match symmetric {
         true => axis_poses
             .iter()
             .filter(|(p, loss)| {
-                (p.rotation * Vec3::Y).dot(axis) < 0.0 && *loss <= RIVAL_END_RATIO * starts[chosen].silhouette_loss
+                (p.rotation * Vec3::Y).dot(axis) < 0.0 && *loss <= o.rival_end_ratio * starts[chosen].silhouette_loss
             })
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(p, _)| *p)
@@ -370,7 +349,7 @@ pub(super) fn search_pose(
             .collect(),
         false => {
             let mut rivals = Vec::new();
-            for k in rival_starts(&starts, &candidates, chosen) {
+            for k in rival_starts(&starts, &candidates, chosen, o) {
                 let refined = refine(k, &mut starts, &mut candidates)?;
                 rivals.push(candidates[refined]);
             }
@@ -398,33 +377,40 @@ pub(super) fn search_pose(
     }
     let depth = (pose.translation - photo.camera.origin).length();
     // The search-resolution map, from `start` (or from scratch), reported.
+    let joint_render = RenderSettings {
+        spp: settings.joint.spp,
+        seed: settings.seed,
+    };
     let search_lighting = |pose: &Pose, start: Option<&[f64]>, phases: &mut PhaseLog| -> Result<LightingFit> {
         let t1 = Instant::now();
         let fit = fit_lighting(
             probe,
             photo,
-            pose,
-            work,
-            &quick,
             clipped,
-            Smoothness::quadratic(search_smoothness),
-            LightingPurpose::Search,
-            Pixels::All,
-            &LightSampling::BSDF,
-            start,
-            SOLVE_ITERS,
+            pose,
+            &FitRequest {
+                size: work,
+                render: joint_render,
+                sampling: LightSampling::BSDF,
+                smoothness: Smoothness::quadratic(search_smoothness),
+                purpose: LightingPurpose::Search,
+                pixels: Pixels::All,
+                start,
+                max_iters: settings.lighting.solve_iters,
+            },
+            &settings.lighting,
         )?;
         phases.push(lighting_report("lighting", &fit, t1));
         Ok(fit)
     };
-    if settings.rounds > 0 {
+    if settings.joint.rounds > 0 {
         let mut fit = search_lighting(&pose, None, phases)?;
-        for round in 0..settings.rounds {
+        for round in 0..settings.joint.rounds {
             let env = env_from_texels(&fit.env, work.0, work.1)?;
             let (new_pose, report) = fit_pose_to_image(&ctx, pose, &env, settings, depth, round)?;
             phases.push(report);
             pose = new_pose;
-            if round + 1 == settings.rounds {
+            if round + 1 == settings.joint.rounds {
                 // The output's own solve follows.
                 break;
             }

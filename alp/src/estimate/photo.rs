@@ -7,6 +7,8 @@ use render::camera::Camera;
 use render::image_io::{Mask, RgbImage};
 use render::{RenderError, Result};
 
+use super::settings::PhotoSettings;
+
 /// The photo and what is known about it.
 pub struct Photo {
     /// Linear HDR RGB.
@@ -144,7 +146,7 @@ pub fn mask_on_border(mask: &Mask) -> usize {
 
 /// Pixels at the photo's clipping level: when many mask pixels share the
 /// maximum value of a channel, the sensor saturated there.
-pub(super) fn clipped_pixels(photo: &Photo) -> Vec<bool> {
+pub(super) fn clipped_pixels(photo: &Photo, settings: &PhotoSettings) -> Vec<bool> {
     let mut clipped = vec![false; photo.mask.inside.len()];
     for c in 0..3 {
         let max = photo
@@ -156,9 +158,9 @@ pub(super) fn clipped_pixels(photo: &Photo) -> Vec<bool> {
             .map(|(p, _)| p[c])
             .fold(0.0f32, f32::max);
         let at_max: Vec<usize> = (0..clipped.len())
-            .filter(|&i| photo.mask.inside[i] && photo.image.pixels[i][c] >= 0.9999 * max)
+            .filter(|&i| photo.mask.inside[i] && photo.image.pixels[i][c] >= settings.clip_level * max)
             .collect();
-        if at_max.len() * 200 > photo.mask.count() {
+        if at_max.len() * settings.clip_one_in > photo.mask.count() {
             at_max.into_iter().for_each(|i| clipped[i] = true);
         }
     }
@@ -221,13 +223,13 @@ pub struct WorkingPhoto {
 }
 
 impl WorkingPhoto {
-    /// `full` brought to a mask of about `budget` pixels (0: as it is).
-    pub fn new(full: &Photo, budget: usize) -> Result<Self> {
-        let factor = working_factor(full.mask.count(), budget);
+    /// `full` brought to a mask of about `PhotoSettings::working_mask_pixels`.
+    pub fn new(full: &Photo, settings: &PhotoSettings) -> Result<Self> {
+        let factor = working_factor(full.mask.count(), settings.working_mask_pixels);
         let (photo, clipped) = match factor > 1.0 {
-            false => (None, clipped_pixels(full)),
+            false => (None, clipped_pixels(full, settings)),
             true => {
-                let (photo, clipped) = full.downsampled(factor, &clipped_pixels(full))?;
+                let (photo, clipped) = full.downsampled(factor, &clipped_pixels(full, settings))?;
                 (Some(photo), clipped)
             }
         };

@@ -16,8 +16,7 @@ use render::pose::Pose;
 use render::sampling::EnvSampler;
 
 use super::lighting::{
-    LEAN_SOLVE_ITERS, LightingFit, LightingPurpose, SOLVE_ITERS, Smoothness, env_from_texels, final_spp, fit_lighting,
-    lighting_report,
+    FitRequest, LightingFit, LightingPurpose, Smoothness, env_from_texels, fit_lighting, lighting_report,
 };
 use super::photo::{Photo, Pixels};
 use super::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
@@ -119,7 +118,7 @@ impl PhotoJudge<'_> {
         mut rivals: Vec<Pose>,
         patterned: bool,
     ) -> Result<Judged> {
-        if self.settings.spp_pilot == 0 {
+        if self.settings.lighting.spp_pilot == 0 {
             let (pilot, rival, size, lean) = (None, None, None, None);
             return Ok(Judged {
                 pose,
@@ -147,7 +146,10 @@ impl PhotoJudge<'_> {
         let radius_px = (self.photo.mask.count() as f32 / std::f32::consts::PI).sqrt();
         let mesh = &self.probe.asset.mesh;
         let grown = |pose: &Pose, px: f32| hypotheses::rescaled(pose, mesh, 1.0 + px / radius_px);
-        let size_search = (self.settings.size_step_px, self.settings.size_reach_px);
+        let size_search = (
+            self.settings.pose_search.size_step_px,
+            self.settings.pose_search.size_reach_px,
+        );
         let size = self.search(
             phases,
             &mut kept,
@@ -179,7 +181,10 @@ impl PhotoJudge<'_> {
             true => None,
             false => {
                 let camera = &self.photo.camera;
-                let lean_search = (self.settings.lean_step_deg, self.settings.lean_reach_deg);
+                let lean_search = (
+                    self.settings.pose_search.lean_step_deg,
+                    self.settings.pose_search.lean_reach_deg,
+                );
                 let leaned = |pose: &Pose, deg: f32| hypotheses::leaned(pose, mesh, camera, deg);
                 self.search(phases, &mut kept, "lighting_lean", lean_search, Pixels::All, &leaned)?
             }
@@ -199,22 +204,28 @@ impl PhotoJudge<'_> {
     fn pilot(&self, pose: &Pose, phases: &mut PhaseLog) -> Result<Vec<f64>> {
         let t1 = Instant::now();
         let render = RenderSettings {
-            spp: final_spp(self.settings.spp_pilot, self.photo.mask.count(), 1),
+            spp: self
+                .settings
+                .lighting
+                .final_spp(self.settings.lighting.spp_pilot, self.photo.mask.count(), 1),
             seed: self.settings.seed.wrapping_add(78),
         };
         let fit = fit_lighting(
             self.probe,
             self.photo,
-            pose,
-            self.work,
-            &render,
             self.clipped,
-            Smoothness::quadratic(self.settings.smoothness),
-            LightingPurpose::Output,
-            Pixels::All,
-            &LightSampling::BSDF.with_interreflection(),
-            None,
-            SOLVE_ITERS,
+            pose,
+            &FitRequest {
+                size: self.work,
+                render,
+                sampling: LightSampling::BSDF.with_interreflection(),
+                smoothness: Smoothness::quadratic(self.settings.lighting.smoothness),
+                purpose: LightingPurpose::Output,
+                pixels: Pixels::All,
+                start: None,
+                max_iters: self.settings.lighting.solve_iters,
+            },
+            &self.settings.lighting,
         )?;
         phases.push(PhaseReport {
             pose: Some(PoseRecord::from(pose)),
@@ -315,7 +326,7 @@ impl PhotoJudge<'_> {
             rival_axis: (rival.rotation * Vec3::Y).to_array(),
             chosen_db: chosen.0,
             rival_db,
-            kept_rival: rival_db > chosen.0 + self.settings.search_margin_db,
+            kept_rival: rival_db > chosen.0 + self.settings.pose_search.search_margin_db,
         };
         kept.scored = Some(match rival_scored {
             Ok((rival_score, rival_map)) if report.kept_rival => {
@@ -329,7 +340,7 @@ impl PhotoJudge<'_> {
 
     /// The pose searches' measure of `pose`: the lighting solved there from
     /// the map `start` (of a pose near it) with MIS guided by that map
-    /// ([`Settings::spp_lean`], [`LEAN_SOLVE_ITERS`], on the pixels `pixels`
+    /// ([`Settings::spp_lean`], `LightingSettings::lean_solve_iters`, on the pixels `pixels`
     /// keeps), and its data term's weighted error in -dB (higher is better;
     /// minus infinity with no data pixel left): the weighted error, not the
     /// PSNR, which a sun's highlight dominates.
@@ -338,22 +349,29 @@ impl PhotoJudge<'_> {
         let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
         let sampling = LightSampling::mis(&sampler).with_interreflection();
         let render = RenderSettings {
-            spp: final_spp(settings.spp_lean, self.photo.mask.count(), sampling.strategies()),
+            spp: settings.lighting.final_spp(
+                settings.lighting.spp_lean,
+                self.photo.mask.count(),
+                sampling.strategies(),
+            ),
             seed: settings.seed.wrapping_add(79),
         };
         let fit = fit_lighting(
             self.probe,
             self.photo,
-            pose,
-            work,
-            &render,
             self.clipped,
-            Smoothness::quadratic(settings.smoothness),
-            LightingPurpose::Output,
-            pixels,
-            &sampling,
-            Some(start),
-            LEAN_SOLVE_ITERS,
+            pose,
+            &FitRequest {
+                size: work,
+                render,
+                sampling,
+                smoothness: Smoothness::quadratic(settings.lighting.smoothness),
+                purpose: LightingPurpose::Output,
+                pixels,
+                start: Some(start),
+                max_iters: settings.lighting.lean_solve_iters,
+            },
+            &self.settings.lighting,
         )?;
         let score = match fit.weighted_sq_error() {
             error if error > 0.0 => -10.0 * error.log10(),
@@ -417,7 +435,7 @@ impl PhotoJudge<'_> {
             Ok(score)
         })?;
         let (x, map, score) = best.expect("the line search scores the searched pose");
-        let (kept, kept_scored) = match score > tried[0].1 + self.settings.search_margin_db {
+        let (kept, kept_scored) = match score > tried[0].1 + self.settings.pose_search.search_margin_db {
             true => (x, (score, map)),
             false => (0.0, (tried[0].1, centre.expect("the searched pose is scored first"))),
         };
@@ -428,7 +446,7 @@ impl PhotoJudge<'_> {
     /// phase `lighting_refine`) over the lean, the sway
     /// ([`hypotheses::swayed`]) and, for a `patterned` probe, the turn about
     /// its axis, each from where the one before left it, in rounds until
-    /// one keeps no move (at most [`PHOTO_REFINE_ROUNDS`]). Every
+    /// one keeps no move (at most `PoseSearchSettings::photo_refine_rounds`). Every
     /// candidate's lighting is solved from `start`, the map of a pose near
     /// it; `scored` is `pose`'s score, if known. Rounds, because the score
     /// ripples (its samples move with the pose) and a search whose first
@@ -447,8 +465,9 @@ impl PhotoJudge<'_> {
     ) -> Result<(Pose, (f64, Vec<f64>))> {
         let settings = self.settings;
         let (mut pose, mut scored) = (pose, scored);
-        let lean = (settings.lean_step_deg, settings.lean_reach_deg);
-        let turn = (TURN_PER_LEAN * lean.0, TURN_PER_LEAN * lean.1);
+        let lean = (settings.pose_search.lean_step_deg, settings.pose_search.lean_reach_deg);
+        let turn_per_lean = settings.pose_search.turn_per_lean;
+        let turn = (turn_per_lean * lean.0, turn_per_lean * lean.1);
         type Move = fn(&Pose, &Mesh, &Camera, f32) -> Pose;
         let directions: [(&'static str, (f32, f32), Move); 3] = [
             ("lean", lean, hypotheses::leaned),
@@ -456,7 +475,7 @@ impl PhotoJudge<'_> {
             ("turn", turn, |pose, mesh, _, deg| hypotheses::turned(pose, mesh, deg)),
         ];
         let (mesh, camera) = (&self.probe.asset.mesh, &self.photo.camera);
-        for _ in 0..PHOTO_REFINE_ROUNDS {
+        for _ in 0..settings.pose_search.photo_refine_rounds {
             let mut moved = false;
             for &(direction, reach, moved_by) in &directions[..2 + patterned as usize] {
                 let from = pose;
@@ -485,19 +504,11 @@ impl PhotoJudge<'_> {
     }
 }
 
-/// Rounds at most of [`PhotoJudge::refine`].
-const PHOTO_REFINE_ROUNDS: usize = 3;
-
 /// Whether the photo refines the pose search's choice and rivals
 /// (`Settings::photo_refine_px`; a lean search to refine by).
 pub(super) fn photo_refines(photo: &Photo, settings: &Settings) -> bool {
-    settings.lean_step_deg > 0.0 && photo.mask.count() <= settings.photo_refine_px
+    settings.pose_search.lean_step_deg > 0.0 && photo.mask.count() <= settings.pose_search.photo_refine_px
 }
-
-/// The turn's step and reach in a refinement, as multiples of the lean's:
-/// a turn moves the probe's surface by its radius per radian, a lean by
-/// its half length, about twice as far on a can.
-const TURN_PER_LEAN: f32 = 2.0;
 
 #[cfg(test)]
 mod tests {
@@ -542,16 +553,19 @@ mod tests {
         let pilot = fit_lighting(
             &probe,
             &photo,
-            &start,
-            work,
-            &RenderSettings { spp: 16, seed: 78 },
             &clipped,
-            Smoothness::quadratic(settings.smoothness),
-            LightingPurpose::Output,
-            Pixels::All,
-            &LightSampling::BSDF.with_interreflection(),
-            None,
-            SOLVE_ITERS,
+            &start,
+            &FitRequest {
+                size: work,
+                render: RenderSettings { spp: 16, seed: 78 },
+                sampling: LightSampling::BSDF.with_interreflection(),
+                smoothness: Smoothness::quadratic(settings.lighting.smoothness),
+                purpose: LightingPurpose::Output,
+                pixels: Pixels::All,
+                start: None,
+                max_iters: settings.lighting.solve_iters,
+            },
+            &settings.lighting,
         )
         .expect("a pilot map")
         .into_map();

@@ -7,38 +7,25 @@
 use glam::Vec3;
 use render::pose::Pose;
 
-use super::orientation::AXIS_KEEP_RATIO;
 use super::report::StartReport;
-
-/// The env map size the orientation starts are ranked under.
-pub(super) const RANKING_SIZE: (usize, usize) = (16, 8);
-
-/// RGB angles closer than this (degrees) tie.
-pub(super) const RANK_TIE_DEG: f64 = 0.02;
+use super::settings::OrientationSettings;
 
 /// Whether start `a` ranks above start `b`: the smaller colour error, or
 /// on a tie the smaller relative error.
-pub(super) fn ranks_above(a: &StartReport, b: &StartReport) -> bool {
-    if (a.rgb_angle_deg - b.rgb_angle_deg).abs() > RANK_TIE_DEG {
+pub(super) fn ranks_above(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
+    if (a.rgb_angle_deg - b.rgb_angle_deg).abs() > o.rank_tie_deg {
         a.rgb_angle_deg < b.rgb_angle_deg
     } else {
         a.relative_error < b.relative_error
     }
 }
 
-/// Relative difference below which two starts' relative errors are the
-/// same render's (a probe symmetric about its axis, turned): rounding and
-/// the mesh's facets (at most 1.1e-5 between the first two turns of the
-/// suite's caps of one colour, 3.9e-3 or more between its cans'), not
-/// shading.
-pub(super) const SAME_RENDER: f64 = 1e-4;
-
 /// Whether two starts rendered alike: colours that tie (an angle of 2 deg,
 /// a cap's in the studio, moved by 1e-3 of itself between its turns: the
-/// facets again) and relative errors the same to [`SAME_RENDER`].
-pub(super) fn renders_alike(a: &StartReport, b: &StartReport) -> bool {
-    (a.rgb_angle_deg - b.rgb_angle_deg).abs() <= RANK_TIE_DEG
-        && (a.relative_error - b.relative_error).abs() <= SAME_RENDER * a.relative_error.max(b.relative_error)
+/// facets again) and relative errors the same to `OrientationSettings::same_render`.
+pub(super) fn renders_alike(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
+    (a.rgb_angle_deg - b.rgb_angle_deg).abs() <= o.rank_tie_deg
+        && (a.relative_error - b.relative_error).abs() <= o.same_render * a.relative_error.max(b.relative_error)
 }
 
 /// The mean angle (degrees) between rendered and photographed RGB over the
@@ -60,7 +47,7 @@ pub(super) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], wei
 /// The best-ranked of the starts `among` (the first of equals), by colour
 /// ([`ranks_above`]), or for a probe `symmetric` about its axis, which has
 /// no pattern to rank, by silhouette loss. Colour ranks only the starts
-/// whose outline fits within [`AXIS_KEEP_RATIO`] of the best start's (all
+/// whose outline fits within `OrientationSettings::axis_keep_ratio` of the best start's (all
 /// of them when none does): a probe's turns show one outline when it is of
 /// revolution, and the kept axes fit within that ratio; a mug's handle
 /// shows its turn in the outline, which a coarse map's colours can
@@ -75,41 +62,26 @@ pub(super) fn best_ranked(
     starts: &[StartReport],
     among: impl IntoIterator<Item = usize>,
     symmetric: bool,
+    o: &OrientationSettings,
 ) -> Option<usize> {
     let among: Vec<usize> = among.into_iter().collect();
     let least = starts.iter().map(|s| s.silhouette_loss).fold(f64::INFINITY, f64::min);
     let fitting: Vec<usize> = among
         .iter()
         .copied()
-        .filter(|&k| starts[k].silhouette_loss <= AXIS_KEEP_RATIO * least)
+        .filter(|&k| starts[k].silhouette_loss <= o.axis_keep_ratio * least)
         .collect();
     let among = if fitting.is_empty() { among } else { fitting };
     among.into_iter().reduce(|best, k| {
         let above = match symmetric {
             true => starts[k].silhouette_loss < starts[best].silhouette_loss,
-            false => ranks_above(&starts[k], &starts[best]),
+            false => ranks_above(&starts[k], &starts[best], o),
         };
         if above { k } else { best }
     })
 }
 
-/// Yaw refinement stops below this step (degrees). On the suite's eight
-/// cans whose turn shows (default quality), stopping below 0.5 rather than
-/// 2 deg (two more halvings: a last step of 0.7 deg, not 2.8): rotation
-/// error 1.6 / 1.0 / 1.0 / 1.0 -> 0.3 / 0.4 / 0.5 / 0.4 deg on four,
-/// 0.5 -> 1.1 on one, the same on three; 0.05 s more per image.
-pub(super) const YAW_REFINE_DEG: f32 = 0.5;
-
-/// A start of a probe with a pattern whose RGB angle is within this
-/// (degrees) of the chosen one's, at the other end or half a turn away, is
-/// its rival, which the photo judges. Such rivals ranked 0.13 to 0.61 deg
-/// behind: the lying studio can (a half turn its label shows alike), two
-/// of six scenes of the can at half its roughness, whose coarse ranking
-/// maps hardly tell, and a clipped studio can (where the chosen start was
-/// right, and kept).
-pub(super) const RIVAL_RANK_DEG: f64 = 1.0;
-
-/// The rivals of start `chosen` (see [`RIVAL_RANK_DEG`]): the best-ranked
+/// The rivals of start `chosen` (see `OrientationSettings::rival_rank_deg`): the best-ranked
 /// start at the other end of the probe (its axis the other way) and the
 /// best-ranked half a turn away about the same axis, each if it ranked
 /// within the margin. Each kind's best, not only the better of the two: a
@@ -118,15 +90,20 @@ pub(super) const RIVAL_RANK_DEG: f64 = 1.0;
 /// the right end, whose map then scored 1.65 dB higher), and a small probe
 /// refined by the photo had an end and a half turn both rank close, the
 /// better ranked the wrong end's half turn.
-pub(super) fn rival_starts(starts: &[StartReport], candidates: &[Pose], chosen: usize) -> Vec<usize> {
+pub(super) fn rival_starts(
+    starts: &[StartReport],
+    candidates: &[Pose],
+    chosen: usize,
+    o: &OrientationSettings,
+) -> Vec<usize> {
     let axis = candidates[chosen].rotation * Vec3::Y;
     let other_end = |k: usize| (candidates[k].rotation * Vec3::Y).dot(axis) < 0.0;
     let half_turn = |k: usize| {
         let turn = (starts[k].yaw_deg - starts[chosen].yaw_deg + 540.0).rem_euclid(360.0) - 180.0;
         !other_end(k) && starts[k].axis == starts[chosen].axis && turn.abs() > 90.0
     };
-    let close = |k: &usize| starts[*k].rgb_angle_deg - starts[chosen].rgb_angle_deg <= RIVAL_RANK_DEG;
-    let best = |kind: &dyn Fn(usize) -> bool| best_ranked(starts, (0..starts.len()).filter(|&k| kind(k)), false);
+    let close = |k: &usize| starts[*k].rgb_angle_deg - starts[chosen].rgb_angle_deg <= o.rival_rank_deg;
+    let best = |kind: &dyn Fn(usize) -> bool| best_ranked(starts, (0..starts.len()).filter(|&k| kind(k)), false, o);
     [best(&other_end), best(&half_turn)]
         .into_iter()
         .flatten()
@@ -137,6 +114,12 @@ pub(super) fn rival_starts(starts: &[StartReport], candidates: &[Pose], chosen: 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimate::Settings;
+
+    /// The default settings.
+    fn o() -> OrientationSettings {
+        Settings::default().orientation
+    }
     use glam::Quat;
 
     /// A start's account with the ranking errors `rgb_angle_deg` and `relative_error`.
@@ -166,20 +149,20 @@ mod tests {
             with_outline(4.0, 0.0008),
             with_outline(3.5, 0.0011),
         ];
-        assert_eq!(best_ranked(&mug, 0..3, false), Some(2));
+        assert_eq!(best_ranked(&mug, 0..3, false, &o()), Some(2));
         // Among the others only, the best-ranked of them.
-        assert_eq!(best_ranked(&mug, [0, 1], false), Some(1));
+        assert_eq!(best_ranked(&mug, [0, 1], false, &o()), Some(1));
         // None fits near the best: colour ranks them all.
-        assert_eq!(best_ranked(&mug, [0], false), Some(0));
+        assert_eq!(best_ranked(&mug, [0], false, &o()), Some(0));
         // Turns of a probe of revolution show one outline: colour decides.
         let can = [
             with_outline(3.05, 0.0010),
             with_outline(4.0, 0.0008),
             with_outline(3.5, 0.0011),
         ];
-        assert_eq!(best_ranked(&can, 0..3, false), Some(0));
+        assert_eq!(best_ranked(&can, 0..3, false, &o()), Some(0));
         // A symmetric probe goes by its outline alone.
-        assert_eq!(best_ranked(&can, 0..3, true), Some(1));
+        assert_eq!(best_ranked(&can, 0..3, true, &o()), Some(1));
     }
 
     #[test]
@@ -190,14 +173,16 @@ mod tests {
         // measured them.
         assert!(renders_alike(
             &start(2.114773668, 0.282519015),
-            &start(2.112511746, 0.282515772)
+            &start(2.112511746, 0.282515772),
+            &o()
         ));
         assert!(!renders_alike(
             &start(11.640109023, 1.185091142),
-            &start(12.560607700, 1.189073297)
+            &start(12.560607700, 1.189073297),
+            &o()
         ));
         // Colours that tie but relative errors 3e-3 apart: a pattern turned.
-        assert!(!renders_alike(&start(5.0, 0.300), &start(5.01, 0.3009)));
+        assert!(!renders_alike(&start(5.0, 0.300), &start(5.01, 0.3009), &o()));
     }
 
     #[test]
@@ -222,7 +207,7 @@ mod tests {
                 start(0, -170.0, angles[2]),
                 start(1, 20.0, angles[3]),
             ];
-            rival_starts(&starts, &[up(10.0), up(60.0), up(-170.0), down(20.0)], 0)
+            rival_starts(&starts, &[up(10.0), up(60.0), up(-170.0), down(20.0)], 0, &o())
         };
         // A nearby turn is no rival, however close it ranked; the best of
         // each kind that ranked close is.

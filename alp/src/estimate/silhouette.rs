@@ -23,14 +23,9 @@ use render::{RenderError, Result};
 
 use super::photo::{Photo, usable_pixel};
 use super::report::{PhaseReport, PoseRecord, resident_mb};
-use super::settings::Settings;
+use super::settings::{OutlineSettings, Settings};
 use super::{Probe, hypotheses};
 use crate::objective::{Evaluation, ImageTerms, Objective, TermContext, TermReport};
-
-/// The fraction of the pose search's progress (what the objective's
-/// weight schedules follow) that the silhouette phase spans; the joint
-/// rounds share the rest.
-pub(super) const SILHOUETTE_PROGRESS: f64 = 0.5;
 
 /// What one evaluation of the objective during a pose phase sees besides
 /// the pose: the photo, its prepared mask and the phase's progress.
@@ -45,6 +40,7 @@ pub(super) struct PoseContext<'a> {
     pub(super) clipped: &'a [bool],
     /// The photo's mean luminance in the mask (the image terms' scale).
     pub(super) level: f64,
+    pub(super) outline: &'a OutlineSettings,
 }
 
 impl PoseContext<'_> {
@@ -97,29 +93,25 @@ pub(super) enum PoseSteps {
 
 /// Adam over the 8 pose parameters: per parameter kind its own step size
 /// (rotation quaternion, translation in metres scaled by the depth, log scale).
-pub(super) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps) -> Result<Adam> {
+pub(super) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps, outline: &OutlineSettings) -> Result<Adam> {
     let (factor, last) = match steps {
         PoseSteps::Full => (1.0, 1.0),
-        PoseSteps::Polish => (0.25, 0.05),
+        PoseSteps::Polish => (outline.polish_step, outline.polish_last),
     };
     let anneal = Cosine::new(iters.max(1), last).map_err(|e| RenderError::value("pose optimiser", e.to_string()))?;
     let group = |range, step: f64| ParamGroup::new(range, factor * step).schedule(anneal);
     Adam::builder(POSE_PARAMS)
-        .group(group(0..4, 0.02))
-        .group(group(4..7, 0.004 * depth as f64))
-        .group(group(7..8, 0.005))
+        .group(group(0..4, outline.adam_steps[0]))
+        .group(group(4..7, outline.adam_steps[1] * depth as f64))
+        .group(group(7..8, outline.adam_steps[2]))
         .max_iters(iters)
         .build()
         .map_err(|e| RenderError::value("pose optimiser", e.to_string()))
 }
 
-/// Per-term gradient norms are measured at every this-many-th evaluation
-/// of a pose phase and at its last (each costs a backward pass per term).
-pub(super) const GRADIENT_NORM_EVERY: usize = 10;
-
 /// Adam over the pose parameters from `start`: each evaluation records the
 /// objective with `record(tape, pose, evaluation)` on a fresh f64 tape and
-/// reports every term's value (and, every [`GRADIENT_NORM_EVERY`]
+/// reports every term's value (and, every `OutlineSettings::gradient_norm_every`
 /// evaluations and at the last, its gradient norm). A failed evaluation
 /// (the probe left the view) ends the phase with its error.
 pub(super) fn fit_pose<R>(
@@ -128,20 +120,21 @@ pub(super) fn fit_pose<R>(
     iters: usize,
     depth: f32,
     steps: PoseSteps,
+    outline: &OutlineSettings,
     mut record: R,
 ) -> Result<(Pose, f64, PhaseReport)>
 where
     R: for<'t> FnMut(&'t Tape<f64>, &PoseVars<'t, f64>, usize) -> Result<Evaluation<'t>>,
 {
     let t0 = Instant::now();
-    let mut adam = pose_adam(iters, depth, steps)?;
+    let mut adam = pose_adam(iters, depth, steps, outline)?;
     let (mut evals, mut failure, mut per_iteration) = (0usize, None, Vec::with_capacity(iters + 1));
     let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
         let tape = Tape::<f64>::new();
         let pose_vars = PoseVars::new(&tape, x, true);
         let result = record(&tape, &pose_vars, evals).and_then(|evaluation| {
             // Adam evaluates once per iteration and once more at the end.
-            if evals % GRADIENT_NORM_EVERY == 0 || evals >= iters {
+            if evals % outline.gradient_norm_every == 0 || evals >= iters {
                 // The report's backward passes leave the total's gradient on the tape.
                 per_iteration.push(evaluation.report(&[pose_vars.params])?);
             } else {
@@ -190,7 +183,7 @@ where
 
 /// A silhouette phase of `iters` iterations from `start`, the objective's
 /// progress running over `progress` (from 0: the decaying priors hold the
-/// start while the silhouette pulls it in; from [`SILHOUETTE_PROGRESS`]:
+/// start while the silhouette pulls it in; from `OutlineSettings::progress`:
 /// the silhouette alone): returns the pose, the final loss and the report.
 /// The orientation prior holds the start near its own orientation (one
 /// towards a common orientation would pull every start there).
@@ -208,11 +201,19 @@ pub(super) fn fit_silhouette(
     };
     let iters = iters.max(1);
     let depth = (start.translation - ctx.photo.camera.origin).length();
-    let (pose, loss, report) = fit_pose(name, start, iters, depth, steps, |tape, pose_vars, eval| {
-        let t = (eval as f64 / iters as f64).min(1.0);
-        let at = progress.start + t * (progress.end - progress.start);
-        ctx.evaluate(tape, pose_vars, None, at, seed.wrapping_add(eval as u64))
-    })?;
+    let (pose, loss, report) = fit_pose(
+        name,
+        start,
+        iters,
+        depth,
+        steps,
+        ctx.outline,
+        |tape, pose_vars, eval| {
+            let t = (eval as f64 / iters as f64).min(1.0);
+            let at = progress.start + t * (progress.end - progress.start);
+            ctx.evaluate(tape, pose_vars, None, at, seed.wrapping_add(eval as u64))
+        },
+    )?;
     let camera = &ctx.photo.camera;
     let pose = hypotheses::at_own_size(&pose, &ctx.probe.asset.mesh, camera);
     Ok((
@@ -233,8 +234,8 @@ pub(super) fn refit_silhouette(
     start: Pose,
     settings: &Settings,
 ) -> Result<(Pose, f64, PhaseReport)> {
-    let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
-    let iters = (settings.silhouette_iters / 2, PoseSteps::Full);
+    let progress = ctx.outline.progress..ctx.outline.progress;
+    let iters = (settings.outline.iters / 2, PoseSteps::Full);
     fit_silhouette(ctx, name, start, iters, progress, settings.seed)
 }
 
@@ -254,8 +255,8 @@ pub(super) fn refit_silhouette(
 /// / 1.16 -> 5.67 / 1.34 / 0.97 deg. It costs a start's fit (about 0.2 s
 /// at default quality; the rival's alongside).
 pub(super) fn polish_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings) -> Result<(Pose, PhaseReport)> {
-    let progress = SILHOUETTE_PROGRESS..SILHOUETTE_PROGRESS;
-    let iters = (settings.silhouette_iters, PoseSteps::Polish);
+    let progress = ctx.outline.progress..ctx.outline.progress;
+    let iters = (settings.outline.iters, PoseSteps::Polish);
     let (fitted, _, report) = fit_silhouette(ctx, "silhouette_polish", start, iters, progress, settings.seed)?;
     let pose = hypotheses::on_axis_of(&start, &fitted, &ctx.probe.asset.mesh);
     Ok((
@@ -276,7 +277,7 @@ pub(super) fn silhouette_loss(ctx: &PoseContext, pose: &Pose, seed: u64) -> Resu
     };
     let tape = Tape::<f64>::new();
     let pose_vars = PoseVars::new(&tape, &pack_pose(pose), false);
-    let evaluation = ctx.evaluate(&tape, &pose_vars, None, SILHOUETTE_PROGRESS, seed)?;
+    let evaluation = ctx.evaluate(&tape, &pose_vars, None, ctx.outline.progress, seed)?;
     Ok(tape.item(evaluation.total))
 }
 
@@ -292,46 +293,54 @@ pub(super) fn fit_pose_to_image(
 ) -> Result<(Pose, PhaseReport)> {
     let photo = ctx.photo;
     let seed = settings.seed.wrapping_add(1000 * (round as u64 + 1));
-    let iters = settings.pose_iters.max(1);
-    let (pose, _, report) = fit_pose("pose", start, iters, depth, PoseSteps::Full, |tape, pose_vars, eval| {
-        let vars = ProbeVars::new(tape, ctx.probe.asset, false);
-        let posed = PosedMesh::new(&vars.mesh, pose_vars);
-        let rs = RenderSettings {
-            spp: settings.spp_pose,
-            seed: seed.wrapping_add(eval as u64),
-        };
-        let hits = PrimaryHits::trace(&ctx.probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
-        if hits.is_empty() {
-            return Err(RenderError::value("pose", "the probe left the camera's view"));
-        }
-        let env_vars = ImageVars::env(tape, env, false);
-        let rendered = light_samples(
-            tape,
-            &hits,
-            &photo.camera,
-            &vars,
-            &posed,
-            &ctx.probe.asset.mesh.triangles,
-            &GgxMetal,
-        )
-        .radiance(&env_vars);
-        let target: Vec<[f64; 3]> = hits
-            .pixels
-            .iter()
-            .map(|&p| photo.image.pixels[p as usize].map(|v| v as f64))
-            .collect();
-        let usable: Vec<f64> = hits
-            .pixels
-            .iter()
-            .zip(&hits.coverage)
-            .map(|(&p, &c)| f64::from(u8::from(usable_pixel(photo, ctx.clipped, p, c))))
-            .collect();
-        let image = ImageTerms::new(&hits.pixels, rendered, &target, &usable, ctx.level)?;
-        let span = 1.0 - SILHOUETTE_PROGRESS;
-        let within = (round as f64 + eval as f64 / iters as f64) / settings.rounds.max(1) as f64;
-        let progress = (SILHOUETTE_PROGRESS + span * within).min(1.0);
-        ctx.evaluate(tape, pose_vars, Some(image), progress, seed.wrapping_add(eval as u64))
-    })?;
+    let iters = settings.joint.pose_iters.max(1);
+    let (pose, _, report) = fit_pose(
+        "pose",
+        start,
+        iters,
+        depth,
+        PoseSteps::Full,
+        ctx.outline,
+        |tape, pose_vars, eval| {
+            let vars = ProbeVars::new(tape, ctx.probe.asset, false);
+            let posed = PosedMesh::new(&vars.mesh, pose_vars);
+            let rs = RenderSettings {
+                spp: settings.joint.spp,
+                seed: seed.wrapping_add(eval as u64),
+            };
+            let hits = PrimaryHits::trace(&ctx.probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
+            if hits.is_empty() {
+                return Err(RenderError::value("pose", "the probe left the camera's view"));
+            }
+            let env_vars = ImageVars::env(tape, env, false);
+            let rendered = light_samples(
+                tape,
+                &hits,
+                &photo.camera,
+                &vars,
+                &posed,
+                &ctx.probe.asset.mesh.triangles,
+                &GgxMetal,
+            )
+            .radiance(&env_vars);
+            let target: Vec<[f64; 3]> = hits
+                .pixels
+                .iter()
+                .map(|&p| photo.image.pixels[p as usize].map(|v| v as f64))
+                .collect();
+            let usable: Vec<f64> = hits
+                .pixels
+                .iter()
+                .zip(&hits.coverage)
+                .map(|(&p, &c)| f64::from(u8::from(usable_pixel(photo, ctx.clipped, p, c))))
+                .collect();
+            let image = ImageTerms::new(&hits.pixels, rendered, &target, &usable, ctx.level)?;
+            let span = 1.0 - ctx.outline.progress;
+            let within = (round as f64 + eval as f64 / iters as f64) / settings.joint.rounds.max(1) as f64;
+            let progress = (ctx.outline.progress + span * within).min(1.0);
+            ctx.evaluate(tape, pose_vars, Some(image), progress, seed.wrapping_add(eval as u64))
+        },
+    )?;
     Ok((pose, report))
 }
 
@@ -365,6 +374,7 @@ mod tests {
         let photo = photo_of(&asset, &truth, camera, &EnvMap::constant(8, [1.0; 3]), 4);
         let reference = ReferenceMask::new(&photo.mask).expect("a mask");
         let objective = Objective::paper_default();
+        let settings = Settings::new(Quality::Default);
         let ctx = PoseContext {
             probe: &probe,
             photo: &photo,
@@ -373,13 +383,13 @@ mod tests {
             front_facing: hypotheses::front_facing(&photo.camera),
             clipped: &vec![false; photo.camera.pixel_count()],
             level: mask_mean_luminance(&photo.image, &photo.mask).expect("a level"),
+            outline: &settings.outline,
         };
         let axis = |p: &Pose| p.rotation * Vec3::Y;
         let view = Vec3::new(0.0, 0.0, -1.0);
         let across = axis(&truth).cross(axis(&truth).cross(view)).normalize();
         let tipped = Quat::from_axis_angle(across, 1f32.to_radians()) * truth.rotation;
         let start = hypotheses::turned(&Pose::new(tipped, 1.0, Vec3::new(0.0005, 0.0, 0.0)), &asset.mesh, 10.0);
-        let settings = Settings::new(Quality::Default);
         let (polished, report) = polish_silhouette(&ctx, start, &settings).expect("a polish");
         assert_eq!(report.name, "silhouette_polish");
         let off = |p: &Pose| axis(p).angle_between(axis(&truth)).to_degrees();

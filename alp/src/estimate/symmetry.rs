@@ -11,12 +11,14 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 use render::probe::ProbeAsset;
 
+use super::settings::SymmetrySettings;
+
 /// The probe turned so that its axis ([`axis_to_y`]) is mesh +Y: the
 /// rotation that does it and the turned asset (None: it was built along
 /// +Y). The estimate turns the probe about +Y and reads its length along
 /// it; its poses are turned back at the end.
-pub fn along_y(asset: &ProbeAsset) -> (Quat, Option<ProbeAsset>) {
-    let to_y = axis_to_y(&asset.mesh);
+pub fn along_y(asset: &ProbeAsset, s: &SymmetrySettings) -> (Quat, Option<ProbeAsset>) {
+    let to_y = axis_to_y(&asset.mesh, s);
     let turned = (to_y != Quat::IDENTITY).then(|| ProbeAsset {
         mesh: asset.mesh.posed(&Pose::new(to_y, 1.0, Vec3::ZERO)),
         ..asset.clone()
@@ -29,40 +31,6 @@ pub fn turned_to_y(pose: &Pose, to_y: Quat) -> Pose {
     Pose::new(pose.rotation * to_y.inverse(), pose.scale, pose.translation)
 }
 
-/// Eigenvalues of the surface's spread closer than this factor are equal:
-/// no axis stands out (a sphere), or not that one.
-pub(super) const DISTINCT_SPREAD: f64 = 1.05;
-
-/// An axis found within this angle (degrees) of the mesh's +Y is +Y: the
-/// mesh was built along it (faceting tilts the found axis a little).
-pub(super) const AXIS_IS_Y_DEG: f64 = 1.0;
-
-/// A facet's normal line passes within this fraction of the surface's size
-/// (RMS distance from its centroid) of an axis of revolution it belongs to,
-/// measured as `((p - c) x n) . a`: faceting leaves a third of a 64-sided
-/// can's triangles within 1 %, all within 5 % (a triangle's centroid is off
-/// its quad's meridian); the surface has that axis when at least
-/// [`REVOLVED_SHARE`] of its area does.
-pub(super) const ON_AXIS: f64 = 0.05;
-
-/// An axis of revolution is one only when the next best line leaves this
-/// many times its residual (the suite's can, cap and ring: 780 to 3,900
-/// times; a sphere, 1.1).
-pub(super) const SECOND_AXIS_RATIO: f64 = 20.0;
-
-/// A surface this much of revolution about its axis (by area) shows one
-/// outline at every turn about it (the suite's can, cap and ring: all of
-/// it; a mug with a handle: 0.90).
-pub(super) const WHOLLY_REVOLVED: f64 = 0.98;
-
-/// Fits of the axis of revolution, each weighing the facets by how far the
-/// one before left their normal lines from it.
-pub(super) const REWEIGHTINGS: usize = 8;
-
-/// The share of a probe's surface that must be of revolution about one
-/// axis for that to be its axis (a mug's body without its handle).
-pub(super) const REVOLVED_SHARE: f64 = 0.6;
-
 /// The rotation that turns the probe's axis to mesh +Y: the estimate turns
 /// the probe about +Y (its yaw starts) and reads its length along it. The
 /// axis is the probe's axis of revolution ([`axis_of_revolution`]: a mug's
@@ -71,15 +39,15 @@ pub(super) const REVOLVED_SHARE: f64 = 0.6;
 /// (area-weighted second moments) whose spread stands out from the other
 /// two: the longest for a probe longer than wide, the shortest for one
 /// wider than long. Identity when the axis is already +Y (to
-/// [`AXIS_IS_Y_DEG`]) or none stands out (a sphere). Of the axis's two
+/// `SymmetrySettings::axis_is_y_deg`) or none stands out (a sphere). Of the axis's two
 /// directions, the one nearer +Y, or with its largest component positive,
 /// goes to +Y.
-pub fn axis_to_y(mesh: &Mesh) -> Quat {
-    let revolved = axis_of_revolution(mesh).map(|revolution| revolution.axis);
-    let Some(axis) = revolved.or_else(|| axis_of_spread(mesh)) else {
+pub fn axis_to_y(mesh: &Mesh, s: &SymmetrySettings) -> Quat {
+    let revolved = axis_of_revolution(mesh, s).map(|revolution| revolution.axis);
+    let Some(axis) = revolved.or_else(|| axis_of_spread(mesh, s)) else {
         return Quat::IDENTITY;
     };
-    if axis.y.abs() >= AXIS_IS_Y_DEG.to_radians().cos() {
+    if axis.y.abs() >= s.axis_is_y_deg.to_radians().cos() {
         return Quat::IDENTITY;
     }
     let largest = axis.abs().max_element();
@@ -108,7 +76,7 @@ pub(super) fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
         .collect()
 }
 
-/// The line about which at least [`REVOLVED_SHARE`] of the surface is of
+/// The line about which at least `SymmetrySettings::revolved_share` of the surface is of
 /// revolution, if there is one line only (a sphere, of revolution about
 /// every line through its centre, has none): its direction and that share.
 /// Every
@@ -119,7 +87,7 @@ pub(super) fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
 /// of revolution). Least squares over the facets' areas gives `m` for
 /// each `a`, and `a` as the least eigenvector of what is left; facets off
 /// the axis (a handle) are then weighed down and the fit repeated.
-pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
+pub fn axis_of_revolution(mesh: &Mesh, s: &SymmetrySettings) -> Option<Revolution> {
     let facets = facets(mesh);
     let area: f64 = facets.iter().map(|f| f.2).sum();
     let centroid = facets.iter().map(|(p, _, w)| *p * *w).sum::<DVec3>() / area.max(1e-300);
@@ -137,7 +105,7 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
     let mut weight: Vec<f64> = facets.iter().map(|f| f.2 / area).collect();
     // The last fit's axis, residuals and whether a second line fits about as well.
     let mut last = None;
-    for _ in 0..REWEIGHTINGS {
+    for _ in 0..s.reweightings {
         let outer = |u: DVec3, v: DVec3| DMat3::from_cols(u * v.x, u * v.y, u * v.z);
         let (mut nn, mut mn, mut mm) = (DMat3::ZERO, DMat3::ZERO, DMat3::ZERO);
         for ((p, n), &w) in lines.iter().zip(&weight) {
@@ -165,21 +133,21 @@ pub fn axis_of_revolution(mesh: &Mesh) -> Option<Revolution> {
         weight = facets
             .iter()
             .zip(&residual)
-            .map(|(f, r)| f.2 / area / (1.0 + (r / ON_AXIS).powi(2)))
+            .map(|(f, r)| f.2 / area / (1.0 + (r / s.on_axis).powi(2)))
             .collect();
         // A second line that fits about as well: all normal lines pass
         // through one point (a sphere), and every line through it is an axis.
-        let single = values[order[1]] >= SECOND_AXIS_RATIO * values[order[0]].max(1e-12);
+        let single = values[order[1]] >= s.second_axis_ratio * values[order[0]].max(1e-12);
         last = Some((axis, moment, residual, single));
     }
     let (axis, moment, residual, single) = last?;
     let revolved: f64 = facets
         .iter()
         .zip(&residual)
-        .filter(|(_, r)| **r <= ON_AXIS)
+        .filter(|(_, r)| **r <= s.on_axis)
         .map(|(f, _)| f.2)
         .sum();
-    (single && revolved >= REVOLVED_SHARE * area).then_some(Revolution {
+    (single && revolved >= s.revolved_share * area).then_some(Revolution {
         axis,
         // The point of the line nearest the centroid, back in mesh units.
         point: centroid + axis.cross(moment) * size,
@@ -195,17 +163,17 @@ pub struct Revolution {
     pub axis: DVec3,
     /// A point on the axis.
     pub point: DVec3,
-    /// The share of the area whose normal lines meet the axis (within [`ON_AXIS`]).
+    /// The share of the area whose normal lines meet the axis (within `SymmetrySettings::on_axis`).
     pub share: f64,
 }
 
 /// Whether turning the probe about its axis changes its outline: a surface
 /// not wholly of revolution (a mug's handle; a box), though not a sphere,
 /// of revolution about every line through its centre.
-pub fn turns_show(mesh: &Mesh) -> bool {
-    match axis_of_revolution(mesh) {
-        Some(revolution) => revolution.share < WHOLLY_REVOLVED,
-        None => axis_of_spread(mesh).is_some(),
+pub fn turns_show(mesh: &Mesh, s: &SymmetrySettings) -> bool {
+    match axis_of_revolution(mesh, s) {
+        Some(revolution) => revolution.share < s.wholly_revolved,
+        None => axis_of_spread(mesh, s).is_some(),
     }
 }
 
@@ -222,9 +190,9 @@ pub fn turns_show(mesh: &Mesh) -> bool {
 /// more than `renders_alike` allows: relative errors up to 1.5e-3 apart
 /// against 1e-4, or RGB angles 0.034 deg against 0.02; ranked as
 /// patterned, 2 upright caps came out end for end).
-pub fn looks_alike_turned(asset: &ProbeAsset) -> Option<bool> {
-    let revolution = axis_of_revolution(&asset.mesh)?;
-    if revolution.share < WHOLLY_REVOLVED {
+pub fn looks_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bool> {
+    let revolution = axis_of_revolution(&asset.mesh, s)?;
+    if revolution.share < s.wholly_revolved {
         return Some(false);
     }
     if [&asset.albedo, &asset.roughness, &asset.visibility]
@@ -239,7 +207,7 @@ pub fn looks_alike_turned(asset: &ProbeAsset) -> Option<bool> {
         .iter()
         .map(|p| (p.as_dvec3() - revolution.point).length())
         .fold(0.0, f64::max);
-    let bin = CIRCLE_BIN * extent;
+    let bin = s.circle_bin * extent;
     // Per circle about the axis (height along it and radius from it, in
     // bins): each channel's least and greatest value, the area sampled
     // and the samples (in key order, so that the sums do not depend on a
@@ -274,16 +242,16 @@ pub fn looks_alike_turned(asset: &ProbeAsset) -> Option<bool> {
         }
     }
     let area_where = |keep: &dyn Fn(&Circle) -> bool| circles.values().filter(|c| keep(c)).map(|c| c.area).sum::<f64>();
-    if area_where(&|c| c.samples >= CIRCLE_MIN_SAMPLES) < 0.5 * total {
+    if area_where(&|c| c.samples >= s.circle_min_samples) < 0.5 * total {
         return None;
     }
     let varied = area_where(&|c| {
         c.least
             .iter()
             .zip(&c.greatest)
-            .any(|(least, greatest)| greatest - least > MATERIAL_TOLERANCE)
+            .any(|(least, greatest)| greatest - least > s.material_tolerance)
     });
-    Some(varied <= VARIED_SHARE * total)
+    Some(varied <= s.varied_share * total)
 }
 
 /// The material sampled along one circle about the axis of revolution.
@@ -294,11 +262,6 @@ pub(super) struct Circle {
     pub(super) samples: usize,
 }
 
-/// Circles about the axis are told apart to this fraction of the probe's
-/// extent from it: points of a revolved mesh's facets that its turns map
-/// onto each other fall in one.
-pub(super) const CIRCLE_BIN: f64 = 1e-3;
-
 /// Where on each facet the material is sampled (barycentric weights of
 /// corners 1 and 2): its centroid and a point towards each corner.
 pub(super) const CIRCLE_SAMPLES: [[f32; 2]; 4] = [
@@ -308,23 +271,9 @@ pub(super) const CIRCLE_SAMPLES: [[f32; 2]; 4] = [
     [1.0 / 6.0, 2.0 / 3.0],
 ];
 
-/// A circle sampled this many times at least tells whether the material
-/// varies along it; the asset decides when such circles hold half its area.
-pub(super) const CIRCLE_MIN_SAMPLES: usize = 4;
-
-/// A material channel that varies by more than this along a circle shows
-/// the turn (an 8-bit texture's steps are 0.004).
-pub(super) const MATERIAL_TOLERANCE: f32 = 0.01;
-
-/// The material looks alike at every turn when the circles along which it
-/// varies hold at most this share of the area (the probe's own bands put a
-/// circle's samples on both sides of an edge only by rounding). The
-/// procedural cap: none of its 142 circles; the can: 33 % of its area.
-pub(super) const VARIED_SHARE: f64 = 0.01;
-
 /// The principal direction of the surface's spread that stands out from
 /// the other two, if one does (see [`axis_to_y`]).
-pub(super) fn axis_of_spread(mesh: &Mesh) -> Option<DVec3> {
+pub(super) fn axis_of_spread(mesh: &Mesh, s: &SymmetrySettings) -> Option<DVec3> {
     let (mut area, mut first, mut second) = (0.0f64, [0.0f64; 3], [[0.0f64; 3]; 3]);
     for t in 0..mesh.triangles.len() {
         let [a, b, c] = mesh.corners(t).map(|p| p.as_dvec3());
@@ -353,7 +302,7 @@ pub(super) fn axis_of_spread(mesh: &Mesh) -> Option<DVec3> {
         true => (high / mid, vectors[order[2]]),
         false => (mid / low, vectors[order[0]]),
     };
-    (stands_out >= DISTINCT_SPREAD).then(|| DVec3::from_array(axis))
+    (stands_out >= s.distinct_spread).then(|| DVec3::from_array(axis))
 }
 
 /// Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix, by cyclic
@@ -397,6 +346,12 @@ pub(super) fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3])
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::estimate::Settings;
+
+    /// The default settings.
+    fn s() -> SymmetrySettings {
+        Settings::default().symmetry
+    }
     use render::procedural::SodaCan;
 
     #[test]
@@ -434,15 +389,15 @@ mod tests {
         };
         // Built along +Y: left as it is (the suite's outputs stay as they were).
         for mesh in [&can, &cap, &disc] {
-            assert_eq!(axis_to_y(mesh), Quat::IDENTITY);
+            assert_eq!(axis_to_y(mesh, &s()), Quat::IDENTITY);
         }
         // A sphere has no axis.
-        assert_eq!(axis_to_y(&sphere), Quat::IDENTITY);
+        assert_eq!(axis_to_y(&sphere, &s()), Quat::IDENTITY);
         // Built along another axis (and off the origin): turned to +Y.
         let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
         for mesh in [&can, &cap, &disc] {
             let built = mesh.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
-            let to_y = axis_to_y(&built);
+            let to_y = axis_to_y(&built, &s());
             let axis = to_y * (turn * Vec3::Y);
             assert!(axis.y.abs() > 0.9999, "the axis goes to {axis}");
         }
@@ -515,23 +470,23 @@ mod tests {
     #[test]
     fn a_mug_s_axis_is_its_body_s_not_the_direction_its_handle_spreads_it() {
         let mug = mug();
-        let axis = axis_of_revolution(&mug).expect("the body's axis").axis;
+        let axis = axis_of_revolution(&mug, &s()).expect("the body's axis").axis;
         assert!(axis.y.abs() > 0.5f64.to_radians().cos(), "axis {axis}");
         // The surface's spread alone would take another direction for it.
-        let spread = axis_of_spread(&mug).expect("a direction stands out");
+        let spread = axis_of_spread(&mug, &s()).expect("a direction stands out");
         assert!(spread.y.abs() < 0.5, "spread {spread}");
-        assert_eq!(axis_to_y(&mug), Quat::IDENTITY);
+        assert_eq!(axis_to_y(&mug, &s()), Quat::IDENTITY);
         // Its handle shows how it is turned; a can and a cap show nothing.
-        assert!(turns_show(&mug));
+        assert!(turns_show(&mug, &s()));
         for probe in [
             SodaCan::default().build(),
             render::procedural::ThermosCap::default().build(),
         ] {
-            assert!(!turns_show(&probe.mesh));
+            assert!(!turns_show(&probe.mesh, &s()));
         }
         let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
         let built = mug.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
-        let axis = axis_to_y(&built) * (turn * Vec3::Y);
+        let axis = axis_to_y(&built, &s()) * (turn * Vec3::Y);
         assert!(axis.y.abs() > 0.9999, "the body's axis goes to {axis}");
     }
 
@@ -540,7 +495,7 @@ mod tests {
         let cap = render::procedural::ThermosCap::default().build();
         // Its roughness varies along its profile only (a rougher recess).
         assert!(!cap.roughness.is_constant());
-        assert_eq!(looks_alike_turned(&cap), Some(true));
+        assert_eq!(looks_alike_turned(&cap, &s()), Some(true));
         // A rougher stripe down one side shows how it is turned.
         let mut striped = cap.clone();
         let image = &mut striped.roughness.image;
@@ -549,9 +504,9 @@ mod tests {
                 image.pixels[row * image.width + column] = [0.5; 3];
             }
         }
-        assert_eq!(looks_alike_turned(&striped), Some(false));
+        assert_eq!(looks_alike_turned(&striped, &s()), Some(false));
         // So does a label, and a turned cap tells as the cap does.
-        assert_eq!(looks_alike_turned(&SodaCan::default().build()), Some(false));
+        assert_eq!(looks_alike_turned(&SodaCan::default().build(), &s()), Some(false));
         let turned = ProbeAsset {
             mesh: cap.mesh.posed(&Pose::new(
                 Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9),
@@ -560,7 +515,7 @@ mod tests {
             )),
             ..cap.clone()
         };
-        assert_eq!(looks_alike_turned(&turned), Some(true));
+        assert_eq!(looks_alike_turned(&turned, &s()), Some(true));
         // One facet in seven, each slid along the axis by its own fraction
         // of 4 mm (a coarse scan's irregular facets): still of revolution,
         // but no circle is sampled often enough to tell.
@@ -579,11 +534,11 @@ mod tests {
             mesh: Mesh::new(positions, normals, uvs, triangles),
             ..cap.clone()
         };
-        assert!(axis_of_revolution(&irregular.mesh).is_some());
-        assert_eq!(looks_alike_turned(&irregular), None);
+        assert!(axis_of_revolution(&irregular.mesh, &s()).is_some());
+        assert_eq!(looks_alike_turned(&irregular, &s()), None);
         // A sphere has no single axis: the renders tell.
         assert_eq!(
-            looks_alike_turned(&render::procedural::UvSphere::default().build()),
+            looks_alike_turned(&render::procedural::UvSphere::default().build(), &s()),
             None
         );
     }
@@ -591,8 +546,8 @@ mod tests {
     #[test]
     fn a_sphere_and_a_box_have_no_axis_of_revolution() {
         let sphere = render::procedural::UvSphere::default().build().mesh;
-        assert_eq!(axis_of_revolution(&sphere), None);
-        assert!(!turns_show(&sphere), "a sphere turned shows its outline");
+        assert_eq!(axis_of_revolution(&sphere, &s()), None);
+        assert!(!turns_show(&sphere, &s()), "a sphere turned shows its outline");
         // A box 3 x 2 x 1, each face in 8 x 8 squares (a scan's facets, not
         // a few large ones that some line meets by chance): a direction of
         // spread stands out, but no surface of revolution.
@@ -623,9 +578,9 @@ mod tests {
         }
         let n = positions.len();
         let cuboid = Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles);
-        assert_eq!(axis_of_revolution(&cuboid), None);
-        assert!(turns_show(&cuboid));
-        let spread = axis_of_spread(&cuboid).expect("a side that stands out");
+        assert_eq!(axis_of_revolution(&cuboid, &s()), None);
+        assert!(turns_show(&cuboid, &s()));
+        let spread = axis_of_spread(&cuboid, &s()).expect("a side that stands out");
         assert!(spread.abs().max_element() > 0.999, "spread {spread}");
     }
 }

@@ -24,13 +24,13 @@ use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 use render::{RenderError, Result};
 
-pub use solve::{FLOOR_OF_LEVEL, LightingSolve, Smoothness, pyramid, resample, solve};
+pub use solve::{LightingSolve, Smoothness, pyramid, resample, solve};
 pub use transport::{MAX_TEXELS, Transport};
 
 use super::Probe;
 use super::photo::{Photo, Pixels, usable_pixel};
 use super::report::{PhaseReport, resident_mb};
-use super::settings::Settings;
+use super::settings::{LightingSettings, Settings};
 use crate::objective::{DARK_FRACTION, luminance, mask_mean_luminance};
 
 /// What a lighting fit is for.
@@ -97,7 +97,7 @@ impl LightingFit {
 
 /// The env map sizes (width, height) of an estimate: the output map's solve
 /// works at `work`, which the probe's sharpest lobe sets; the pose searches
-/// at `search`, at most [`SEARCH_HEIGHT`] rows.
+/// at `search`, at most `LightingSettings::search_height` rows.
 pub(super) struct MapSizes {
     /// The probe's smallest roughness, which sets `work`.
     pub(super) min_roughness: f32,
@@ -106,11 +106,11 @@ pub(super) struct MapSizes {
 }
 
 impl MapSizes {
-    /// The sizes for `asset`, its working height given or (None) from its
+    /// The sizes for `asset`: its working height as set, or (None) from its
     /// roughness.
-    pub(super) fn new(asset: &ProbeAsset, working_height: Option<usize>) -> Result<Self> {
+    pub(super) fn new(asset: &ProbeAsset, lighting: &LightingSettings) -> Result<Self> {
         let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
-        let work_h = working_height.unwrap_or_else(|| self::working_height(min_roughness));
+        let work_h = lighting.working_height.unwrap_or_else(|| working_height(min_roughness));
         if work_h == 0 || 2 * work_h * work_h > MAX_TEXELS {
             return Err(RenderError::value(
                 "working height",
@@ -120,7 +120,7 @@ impl MapSizes {
                 ),
             ));
         }
-        let search_h = work_h.min(SEARCH_HEIGHT);
+        let search_h = work_h.min(lighting.search_height);
         Ok(MapSizes {
             min_roughness,
             work: (2 * work_h, work_h),
@@ -153,7 +153,9 @@ pub(super) fn final_fit(
         None => LightSampling::BSDF,
     }
     .with_interreflection();
-    let spp = final_spp(settings.spp_final, photo.mask.count(), sampling.strategies());
+    let spp = settings
+        .lighting
+        .final_spp(settings.lighting.spp_final, photo.mask.count(), sampling.strategies());
     let render = RenderSettings {
         spp,
         seed: settings.seed.wrapping_add(77),
@@ -161,35 +163,60 @@ pub(super) fn final_fit(
     let fit = fit_lighting(
         probe,
         photo,
-        pose,
-        sizes.work,
-        &render,
         clipped,
-        settings.final_smoothness,
-        LightingPurpose::Output,
-        Pixels::All,
-        &sampling,
-        start.as_deref(),
-        SOLVE_ITERS,
+        pose,
+        &FitRequest {
+            size: sizes.work,
+            render,
+            sampling,
+            smoothness: settings.lighting.final_smoothness,
+            purpose: LightingPurpose::Output,
+            pixels: Pixels::All,
+            start: start.as_deref(),
+            max_iters: settings.lighting.solve_iters,
+        },
+        &settings.lighting,
     )?;
     Ok((fit, spp))
 }
 
-#[allow(clippy::too_many_arguments)]
+/// What a lighting fit solves for, besides the pose.
+pub(super) struct FitRequest<'a> {
+    /// The map's size (width, height).
+    pub(super) size: (usize, usize),
+    /// Samples per pixel and seed of the light samples.
+    pub(super) render: RenderSettings,
+    /// How the light samples pick their directions.
+    pub(super) sampling: LightSampling<'a>,
+    pub(super) smoothness: Smoothness,
+    pub(super) purpose: LightingPurpose,
+    pub(super) pixels: Pixels,
+    /// The map to start from (None: coarse to fine from a constant map).
+    pub(super) start: Option<&'a [f64]>,
+    /// L-BFGS iterations at most (of the finest level).
+    pub(super) max_iters: usize,
+}
+
+/// The lighting at `pose` that `request` asks for: light samples traced,
+/// their transport recorded, the map solved.
 pub(super) fn fit_lighting(
     probe: &Probe,
     photo: &Photo,
-    pose: &Pose,
-    size: (usize, usize),
-    settings: &RenderSettings,
     clipped: &[bool],
-    smoothness: Smoothness,
-    purpose: LightingPurpose,
-    pixels: Pixels,
-    sampling: &LightSampling,
-    start: Option<&[f64]>,
-    max_iters: usize,
+    pose: &Pose,
+    request: &FitRequest,
+    lighting: &LightingSettings,
 ) -> Result<LightingFit> {
+    let FitRequest {
+        size,
+        render: ref settings,
+        ref sampling,
+        smoothness,
+        purpose,
+        pixels,
+        start,
+        max_iters,
+    } = *request;
     // Light samples in passes (`spp_per_pass`), each on its own tape:
     // memory stays that of one pass however many samples the transport
     // gathers. The first pass's pixels are the data; later passes' samples
@@ -198,7 +225,7 @@ pub(super) fn fit_lighting(
     // at most with one pass's hits as many as without, 782 MB with half).
     let passes = settings
         .spp
-        .div_ceil(spp_per_pass(sampling.strategies() * photo.mask.count()))
+        .div_ceil(lighting.spp_per_pass(sampling.strategies() * photo.mask.count()))
         .max(1);
     let mut reference: Option<PrimaryHits> = None;
     let mut row = Vec::new();
@@ -262,7 +289,16 @@ pub(super) fn fit_lighting(
     let (target, mut weight) = pixel_targets(photo, &hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
         let shares = LitShares::new(&segment, &direct, &lit, &env_sampled, hits.pixels.len());
-        let edges = albedo_edges(&hits, &row, &segment, &throughput, &direct, &shares.direct, pixels);
+        let edges = albedo_edges(
+            &hits,
+            &row,
+            &segment,
+            &throughput,
+            &direct,
+            &shares.direct,
+            pixels,
+            lighting,
+        );
         weight
             .iter_mut()
             .zip(&edges)
@@ -274,7 +310,7 @@ pub(super) fn fit_lighting(
         smoothness,
         relative_smoothness: purpose == LightingPurpose::Output,
         floor_of_level: match purpose {
-            LightingPurpose::Output => FLOOR_OF_LEVEL,
+            LightingPurpose::Output => lighting.floor_of_level,
             LightingPurpose::Search => 0.0,
         },
         max_iters,
@@ -297,7 +333,7 @@ pub(super) fn fit_lighting(
                 .map(|(t, w)| w * (t[0] + t[1] + t[2]) / 3.0)
                 .sum::<f64>()
                 / wsum;
-            let levels = pyramid(size, COARSEST_HEIGHT);
+            let levels = pyramid(size, lighting.coarsest_height);
             let mut x = vec![mean.max(1e-6); levels[0].0 * levels[0].1 * 3];
             let (mut evaluations, mut previous) = (0, levels[0]);
             let mut transport = None;
@@ -311,7 +347,7 @@ pub(super) fn fit_lighting(
                 let level_settings = LightingSolve {
                     max_iters: match level == finest {
                         true => solve_settings.max_iters,
-                        false => COARSE_LEVEL_ITERS,
+                        false => lighting.coarse_level_iters,
                     },
                     ..solve_settings
                 };
@@ -371,7 +407,7 @@ pub(super) fn pixel_targets(
 /// changes between the pixel and a neighbour the fit reads: their directional
 /// albedos, their `direct` samples' summed throughputs over their `lit`
 /// shares (the probe's shadow taken out), differ by more than
-/// [`EDGE_CONTRAST`]): a pose off by a fraction of a pixel puts the photo's
+/// `LightingSettings::edge_contrast`): a pose off by a fraction of a pixel puts the photo's
 /// edge elsewhere, and the output map would take the probe's colours in (a
 /// label's red in the sky). An edge of a shadow is none: it moves with the pose smoothly, as
 /// the shading does. (Counted as edges, the pixels along the probe's own
@@ -379,6 +415,7 @@ pub(super) fn pixel_targets(
 /// tilted courtyard can, path-traced by Mitsuba, at its true pose scored
 /// 6.93 / 6.06 / 8.50 deg mirror / shiny / diffuse, against 6.46 / 0.99 /
 /// 0.99.) `row` maps image pixels to `hits.pixels`.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn albedo_edges(
     hits: &PrimaryHits,
     row: &[u32],
@@ -387,6 +424,7 @@ pub(super) fn albedo_edges(
     direct: &[bool],
     lit: &[f64],
     pixels: Pixels,
+    lighting: &LightingSettings,
 ) -> Vec<bool> {
     let mut albedo = vec![[0.0f64; 3]; hits.pixels.len()];
     for ((&s, t), d) in segment.iter().zip(throughput).zip(direct) {
@@ -413,15 +451,11 @@ pub(super) fn albedo_edges(
                 .flatten()
                 .any(|q| {
                     let r = row[q];
-                    r != u32::MAX && contrast(albedo[k], albedo[r as usize]) > EDGE_CONTRAST
+                    r != u32::MAX && contrast(albedo[k], albedo[r as usize]) > lighting.edge_contrast
                 })
         })
         .collect()
 }
-
-/// The relative difference of neighbouring pixels' directional albedos
-/// above which they lie on an edge of the probe's reflectance.
-pub(super) const EDGE_CONTRAST: f64 = 0.15;
 
 /// Per pixel, the shares of its BRDF samples that reach the env map (the
 /// env map's samples, with MIS, go where its light is, not where the lobe
@@ -547,68 +581,6 @@ pub fn working_height(min_roughness: f32) -> usize {
     let rows = std::f32::consts::PI / alpha;
     1usize << rows.log2().round().clamp(4.0, 7.0) as u32
 }
-
-/// The pose searches' map height at most (pilot, rival, size and lean):
-/// they compare poses and start the output's solve, which refines what
-/// they resolve. On the r = 0.1 chrome balls, with the pose estimated,
-/// their maps at 64 rows rather than 128 gave the same errors (1.55 /
-/// 0.33 / 0.13 deg against 1.55 / 0.32 / 0.12); the sunset ball's two
-/// pilot solves took 0.15 and 0.19 s rather than 0.64 and 0.71.
-pub const SEARCH_HEIGHT: usize = 64;
-
-/// Light samples of the final lighting solve at most: its memory (the
-/// samples, then the transport) and time grow with them. The suite's
-/// largest probe (51k pixels) at 128 spp takes 6.5M samples and 507 MB.
-pub const FINAL_SAMPLE_BUDGET: usize = 8 << 20;
-
-/// Samples per pixel of the output map's solves for a probe of
-/// `mask_pixels` with `strategies` light samples per hit (2 with MIS):
-/// `spp`, or as many as [`FINAL_SAMPLE_BUDGET`] allows, but at least
-/// [`LEAST_FINAL_SPP`].
-pub fn final_spp(spp: u32, mask_pixels: usize, strategies: usize) -> u32 {
-    let affordable = FINAL_SAMPLE_BUDGET / (strategies * mask_pixels).max(1);
-    spp.min(affordable.max(LEAST_FINAL_SPP as usize) as u32)
-}
-
-/// Samples per pixel of the output map's solves at least, however large
-/// the probe.
-pub(super) const LEAST_FINAL_SPP: u32 = 16;
-
-/// Samples per pixel of one pass of a lighting fit's light samples at
-/// most. A pixel's samples are stratified within a pass, not across
-/// passes, so the fewer passes the better the samples cover its lobe (at
-/// the true pose of the 18 Mitsuba twins, default quality, seeds 0 and 1:
-/// 3.97 / 0.76 / 0.46 and 4.02 / 0.75 / 0.48 deg mirror / shiny / diffuse
-/// in passes of 16, 3.92 / 0.73 / 0.48 and 3.95 / 0.75 / 0.48 of 64); a
-/// pass's memory is bounded by [`PASS_SAMPLES`] whatever this is.
-pub(super) const SPP_PER_PASS: u32 = 64;
-
-/// Light samples of one pass at most (its tape's memory grows with them):
-/// a probe large in the photo takes fewer samples per pixel per pass.
-pub(super) const PASS_SAMPLES: usize = 1 << 20;
-
-/// Samples per pixel of one pass over a probe of `mask_pixels`.
-pub(super) fn spp_per_pass(mask_pixels: usize) -> u32 {
-    (PASS_SAMPLES / mask_pixels.max(1)).clamp(1, SPP_PER_PASS as usize) as u32
-}
-
-/// L-BFGS iterations at most on the levels below the finest of a
-/// coarse-to-fine lighting solve.
-pub(super) const COARSE_LEVEL_ITERS: usize = 60;
-
-/// The coarsest level of a coarse-to-fine lighting solve (map height).
-pub(super) const COARSEST_HEIGHT: usize = 8;
-
-/// L-BFGS iterations at most of a lighting solve that makes a map.
-pub(super) const SOLVE_ITERS: usize = 300;
-
-/// L-BFGS iterations at most of a lean's solve, which only scores the lean
-/// (started from the pilot map, near its pose). On the suite's 18 Mitsuba
-/// twins, against 300: the same lean kept in every scene (to 1e-3 deg),
-/// 4.38 / 0.86 / 0.52 deg against 4.37 / 0.86 / 0.52, and 0.47 s less per
-/// run on average (9.36 -> 8.89 s); the leans' solves had taken 78
-/// evaluations (median), up to 145.
-pub(super) const LEAN_SOLVE_ITERS: usize = 50;
 
 #[cfg(test)]
 mod tests {
