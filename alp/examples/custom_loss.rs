@@ -8,8 +8,8 @@
 
 use alp::objective::testing::{Fixture, check_term};
 use alp::objective::{Objective, Term, TermContext, Weight, Weighting};
+use alp::{Error, Result};
 use autodiff::{Tape, Var};
-use render::{RenderError, Result};
 
 /// `(A_render / A_ref - 1)^2`, A = mask area in pixels: the soft mask's
 /// coverage in its band plus the hard coverage elsewhere.
@@ -42,10 +42,7 @@ fn main() -> Result<()> {
     let check = check_term(&AreaRatio, &fixture)?;
     println!("{check}");
     if !check.passes() {
-        return Err(RenderError::value(
-            "area_ratio",
-            format!("gradient check failed: {check}"),
-        ));
+        return Err(Error::invalid("area_ratio", format!("gradient check failed: {check}")));
     }
 
     let objective = Objective::paper_default().term(AreaRatio.weight(Weight::decay_to_zero(1.0, 0.5)));

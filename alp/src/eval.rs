@@ -6,11 +6,13 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use render::RenderError;
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::Mask;
 use render::pose::Pose;
-use render::{RenderError, Result};
+
+use crate::error::Result;
 
 use crate::relight::{RelightSettings, RelitSpheres, Sphere, evaluation_region, relight};
 
@@ -215,13 +217,14 @@ pub struct SceneTruth {
 pub fn scene_file(scene: &Path, name: &str) -> Result<PathBuf> {
     let path = scene.join(name);
     if !scene.is_dir() {
-        return Err(RenderError::file(scene, "is not a scene folder (no such directory)"));
+        return Err(RenderError::file(scene, "is not a scene folder (no such directory)").into());
     }
     if !path.is_file() {
         return Err(RenderError::file(
             &path,
             format!("missing: a scene folder needs `{name}` for evaluation (FORMATS.md, \"Scene folder\")"),
-        ));
+        )
+        .into());
     }
     Ok(path)
 }

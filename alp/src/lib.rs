@@ -6,6 +6,7 @@
 //! folders written atomically, the probe catalogue, the declarative
 //! objective, the estimation, evaluation and the `alp` CLI.
 
+pub mod error;
 pub mod estimate;
 pub mod eval;
 pub mod objective;
@@ -14,4 +15,4 @@ pub mod probes;
 pub mod relight;
 pub mod synth;
 
-pub use render::{RenderError, Result};
+pub use crate::error::{Error, Result};

@@ -5,13 +5,13 @@ use std::process::ExitCode;
 
 use alp::relight::RelightSettings;
 use alp::synth::SynthSettings;
+use alp::{Error, Result};
 use clap::{Parser, Subcommand};
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::integrator::{RenderSettings, render_image};
 use render::pose::Pose;
-use render::{RenderError, Result};
 
 /// Accidental light probes: lighting from a photo of a known shiny object.
 #[derive(Parser)]
@@ -175,7 +175,7 @@ fn main() -> ExitCode {
 
 fn render(args: &RenderArgs) -> Result<()> {
     if args.spp == 0 {
-        return Err(RenderError::value("--spp", "needs at least one sample per pixel"));
+        return Err(Error::invalid("--spp", "needs at least one sample per pixel"));
     }
     let probe = alp::probes::load(&args.probe)?;
     let pose = Pose::read(&args.pose)?;
@@ -207,7 +207,7 @@ fn relight(args: &RelightArgs) -> Result<()> {
     let spheres = alp::relight::relight(&env, &camera, &settings)?;
     let image = spheres.side_by_side();
     image.write_exr(&args.out)?;
-    image.write_png_preview(preview_path(&args.out), 0.0)
+    Ok(image.write_png_preview(preview_path(&args.out), 0.0)?)
 }
 
 fn eval(args: &EvalArgs) -> Result<()> {
@@ -236,7 +236,7 @@ fn synth(args: &SynthArgs) -> Result<()> {
     };
     let scene = alp::synth::synthesize(&probe, &env, &settings)?;
     if scene.mask.count() == 0 {
-        return Err(RenderError::value(
+        return Err(Error::invalid(
             "--probe",
             "the probe is not visible in the synthetic view",
         ));
@@ -252,5 +252,5 @@ fn preview_path(out: &Path) -> PathBuf {
 
 fn make_probe(kind: &str, out: &Path) -> Result<()> {
     let probe = alp::probes::procedural(kind)?;
-    alp::output::write_folder_atomically(out, |dir| probe.write(dir))
+    alp::output::write_folder_atomically(out, |dir| Ok(probe.write(dir)?))
 }

@@ -5,7 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
-use render::{RenderError, Result};
+use render::RenderError;
+
+use crate::error::Result;
 
 /// Runs `write` on a fresh temporary folder beside `out`, then replaces `out` with it.
 pub fn write_folder_atomically(out: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
@@ -46,19 +48,19 @@ mod tests {
         let base = std::env::temp_dir().join(format!("alp-output-test-{}", std::process::id()));
         let out = base.join("out");
         write_folder_atomically(&out, |dir| {
-            std::fs::write(dir.join("a.txt"), "first").map_err(|e| RenderError::io(dir, "write", e))
+            std::fs::write(dir.join("a.txt"), "first").map_err(|e| RenderError::io(dir, "write", e).into())
         })
         .expect("first write");
         let failed = write_folder_atomically(&out, |dir| {
             std::fs::write(dir.join("a.txt"), "second").map_err(|e| RenderError::io(dir, "write", e))?;
-            Err(RenderError::file(dir, "simulated failure"))
+            Err(RenderError::file(dir, "simulated failure").into())
         });
         assert!(failed.is_err());
         assert_eq!(std::fs::read_to_string(out.join("a.txt")).expect("kept"), "first");
         let leftovers = std::fs::read_dir(&base).expect("base").count();
         assert_eq!(leftovers, 1, "no temporary folder is left behind");
         write_folder_atomically(&out, |dir| {
-            std::fs::write(dir.join("b.txt"), "third").map_err(|e| RenderError::io(dir, "write", e))
+            std::fs::write(dir.join("b.txt"), "third").map_err(|e| RenderError::io(dir, "write", e).into())
         })
         .expect("replace");
         assert!(!out.join("a.txt").exists() && out.join("b.txt").exists());

@@ -2,9 +2,9 @@
 
 use std::path::Path;
 
+use crate::error::{Error, Result};
 use render::probe::ProbeAsset;
 use render::procedural::{SodaCan, ThermosCap, UvSphere};
-use render::{RenderError, Result};
 
 /// The procedural probes `alp probe make` writes.
 pub const PROCEDURAL: [&str; 3] = ["can", "cap", "sphere"];
@@ -20,7 +20,7 @@ pub fn procedural(kind: &str) -> Result<ProbeAsset> {
             ..UvSphere::default()
         }
         .build()),
-        other => Err(RenderError::value(
+        other => Err(Error::invalid(
             "probe kind",
             format!("unknown procedural probe `{other}` (known: {})", PROCEDURAL.join(", ")),
         )),
@@ -36,5 +36,5 @@ pub fn load(name_or_dir: &Path) -> Result<ProbeAsset> {
     {
         return procedural(kind);
     }
-    ProbeAsset::read(name_or_dir)
+    Ok(ProbeAsset::read(name_or_dir)?)
 }

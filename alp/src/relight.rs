@@ -25,11 +25,11 @@ use std::f32::consts::FRAC_1_PI;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+use crate::error::{Error, Result};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 use render::sampling::{EnvSampler, Frame, Rng, ggx};
-use render::{RenderError, Result};
 
 /// Width and height of each sphere's render, pixels.
 pub const SPHERE_IMAGE_SIZE: u32 = 256;
@@ -120,14 +120,14 @@ impl RelitSpheres {
 /// `scene`'s `up`: 256 x 256, at distance 5, vertical fov 2 asin(1/5) x 1.04 (about 24 degrees).
 pub fn sphere_camera(scene: &Camera) -> Result<Camera> {
     let fov_y_deg = 2.0 * (1.0 / CAMERA_DISTANCE).asin().to_degrees() * FOV_MARGIN;
-    Camera::new(
+    Ok(Camera::new(
         SPHERE_IMAGE_SIZE,
         SPHERE_IMAGE_SIZE,
         fov_y_deg,
         -CAMERA_DISTANCE * scene.forward,
         Vec3::ZERO,
         scene.up,
-    )
+    )?)
 }
 
 /// The pixels the metrics look at: those whose centre ray hits the sphere at least
@@ -157,7 +157,7 @@ pub fn evaluation_region() -> Mask {
 pub fn relight(env: &EnvMap, scene: &Camera, settings: &RelightSettings) -> Result<RelitSpheres> {
     let strata = (settings.spp as f64).sqrt().round() as u32;
     if settings.spp == 0 || strata * strata != settings.spp {
-        return Err(RenderError::value(
+        return Err(Error::invalid(
             "spp",
             format!(
                 "{} is not a positive square (n x n stratified samples: 64, 256, 1024, ...)",

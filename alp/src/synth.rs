@@ -9,6 +9,7 @@ use std::path::{Component, Path, PathBuf};
 
 use glam::{Quat, Vec3};
 
+use render::RenderError;
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
 use render::envmap::EnvMap;
@@ -17,7 +18,8 @@ use render::integrator::{RenderSettings, render_image};
 use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::Rng;
-use render::{RenderError, Result};
+
+use crate::error::{Error, Result};
 
 /// The probe's height in the image, as a fraction of the image height, is drawn from this range
 /// (120 to 230 px of a 480-px image: inside the 100-250 px of the evaluation protocol).
@@ -110,10 +112,10 @@ pub fn synthesize(probe: &ProbeAsset, env: &EnvMap, settings: &SynthSettings) ->
 
 fn validate(settings: &SynthSettings) -> Result<()> {
     if settings.spp == 0 {
-        return Err(RenderError::value("--spp", "needs at least one sample per pixel"));
+        return Err(Error::invalid("--spp", "needs at least one sample per pixel"));
     }
     if !(settings.noise.is_finite() && settings.noise >= 0.0) {
-        return Err(RenderError::value(
+        return Err(Error::invalid(
             "--noise",
             format!("{} is not a standard deviation >= 0", settings.noise),
         ));
@@ -121,10 +123,10 @@ fn validate(settings: &SynthSettings) -> Result<()> {
     if let Some(clip) = settings.exposure_clip
         && !(clip.is_finite() && clip > 0.0)
     {
-        return Err(RenderError::value("--exposure-clip", format!("{clip} is not > 0")));
+        return Err(Error::invalid("--exposure-clip", format!("{clip} is not > 0")));
     }
     if settings.width < 16 || settings.height < 16 {
-        return Err(RenderError::value(
+        return Err(Error::invalid(
             "--width/--height",
             format!("{}x{} is smaller than 16x16", settings.width, settings.height),
         ));
@@ -208,7 +210,14 @@ pub fn random_camera(posed: &[Vec3], width: u32, height: u32, rng: &mut Rng) -> 
             rows.iter().copied().fold(f32::NEG_INFINITY, f32::max) - rows.iter().copied().fold(f32::INFINITY, f32::min);
         distance *= measured / wanted_px;
     }
-    Camera::new(width, height, fov_y_deg, aim + distance * towards_camera, aim, Vec3::Y)
+    Ok(Camera::new(
+        width,
+        height,
+        fov_y_deg,
+        aim + distance * towards_camera,
+        aim,
+        Vec3::Y,
+    )?)
 }
 
 /// `render_image` at `spp` samples per pixel, in passes of at most [`SPP_PER_PASS`] (the
@@ -299,7 +308,7 @@ pub fn probe_reference(probe_arg: &Path, scene_dir: &Path) -> Result<String> {
     relative
         .to_str()
         .map(str::to_string)
-        .ok_or_else(|| RenderError::file(&probe, "the probe's path is not valid UTF-8 (probe.txt is text)"))
+        .ok_or_else(|| RenderError::file(&probe, "the probe's path is not valid UTF-8 (probe.txt is text)").into())
 }
 
 /// The path that leads from folder `from` to `to` (both absolute and free of `..`).
@@ -331,7 +340,7 @@ pub fn write_scene(out: &Path, scene: &SynthScene, env: &EnvMap, probe_reference
         std::fs::write(&probe_txt, format!("{probe_reference}\n"))
             .map_err(|e| RenderError::io(&probe_txt, "write", e))?;
         env.write(dir.join("gt_env.exr"))?;
-        scene.pose.write(dir.join("pose.json"))
+        Ok(scene.pose.write(dir.join("pose.json"))?)
     })
 }
 

@@ -5,13 +5,13 @@
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 
+use alp::Result;
 use alp::objective::testing::{Fixture, check_term};
 use alp::objective::{
     Barycenter, Chamfer, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, RgbVariant, Term, TermContext,
     Weight, Weighting, luminance,
 };
 use autodiff::{CustomOp, Tape, Var};
-use render::Result;
 
 /// Built once: every test reads the same scene.
 fn fixture() -> &'static Fixture {

@@ -4,10 +4,12 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use render::RenderError;
 use render::camera::Camera;
 use render::image_io::{Mask, RgbImage};
 use render::pose::Pose;
-use render::{RenderError, Result};
+
+use crate::error::{Error, Result};
 
 use super::{Photo, Quality, Settings, estimate_with_progress};
 use crate::objective::Objective;
@@ -66,7 +68,7 @@ fn parse_quality(q: &str) -> Result<Quality> {
         "fast" => Ok(Quality::Fast),
         "default" => Ok(Quality::Default),
         "best" => Ok(Quality::Best),
-        other => Err(RenderError::value(
+        other => Err(Error::invalid(
             "--quality",
             format!("`{other}` is not one of fast, default, best"),
         )),
@@ -75,7 +77,7 @@ fn parse_quality(q: &str) -> Result<Quality> {
 
 fn parse_size(s: &str) -> Result<(usize, usize)> {
     let bad = || {
-        RenderError::value(
+        Error::invalid(
             "--env-size",
             format!("`{s}` is not WIDTHxHEIGHT with WIDTH = 2 x HEIGHT"),
         )
@@ -101,7 +103,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         settings.pose_search.size_step_px = 0.5;
     }
     if args.threads == Some(0) {
-        return Err(RenderError::value("--threads", "needs at least one thread"));
+        return Err(Error::invalid("--threads", "needs at least one thread"));
     }
     settings.known_pose = args.pose.as_ref().map(Pose::read).transpose()?;
     if let Some(path) = &args.objective {
@@ -116,7 +118,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
-        .map_err(|e| RenderError::value("--threads", e.to_string()))?;
+        .map_err(|e| Error::invalid("--threads", e.to_string()))?;
     let verbose = std::io::stderr().is_terminal();
     let bar = if verbose {
         indicatif::ProgressBar::new(settings.phase_count() as u64)
@@ -159,7 +161,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         let json = serde_json::to_string_pretty(&result.report)
             .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
         std::fs::write(dir.join("report.json"), json + "\n")
-            .map_err(|e| RenderError::io(dir.join("report.json"), "write", e))
+            .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
     })
 }
 

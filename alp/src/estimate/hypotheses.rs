@@ -6,12 +6,12 @@
 //! towards the view ray, a sway across it, a change of size, the outline's
 //! look-alikes.
 
+use crate::error::{Error, Result};
 use glam::{Mat3, Quat, Vec2, Vec3};
 use render::camera::Camera;
 use render::image_io::Mask;
 use render::mesh::Mesh;
 use render::pose::Pose;
-use render::{RenderError, Result};
 
 use super::settings::HypothesisSettings;
 
@@ -70,7 +70,7 @@ impl MaskShape {
             .map(|(i, _)| Vec2::new((i % mask.width) as f32 + 0.5, (i / mask.width) as f32 + 0.5))
             .collect();
         if points.is_empty() {
-            return Err(RenderError::value("mask", "is empty: no pixel marks the probe"));
+            return Err(Error::invalid("mask", "is empty: no pixel marks the probe"));
         }
         let n = points.len() as f32;
         let barycenter = points.iter().sum::<Vec2>() / n;

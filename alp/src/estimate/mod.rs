@@ -33,6 +33,7 @@ pub mod symmetry;
 
 use std::time::Instant;
 
+use crate::error::{Error, Result};
 use glam::Vec3;
 use render::bsdf::GgxMetal;
 use render::integrator::{RenderSettings, render_image};
@@ -40,7 +41,6 @@ use render::mesh::EdgeAdjacency;
 use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::silhouette::ReferenceMask;
-use render::{RenderError, Result};
 
 pub use lighting::working_height;
 pub use photo::{Photo, WorkingPhoto, mask_on_border, working_factor};
@@ -101,7 +101,7 @@ pub fn estimate_with_progress(
     let out_size = settings.env_size;
     if out_size.0 != 2 * out_size.1 || out_size.1 < 2 {
         let (w, h) = out_size;
-        return Err(RenderError::value("env size", format!("{w}x{h} is not a 2:1 map")));
+        return Err(Error::invalid("env size", format!("{w}x{h} is not a 2:1 map")));
     }
     // The probe, its axis turned to mesh +Y (the search turns it about +Y).
     let (to_y, along_y) = symmetry::along_y(asset, &settings.symmetry);

@@ -10,12 +10,12 @@
 
 use std::time::Instant;
 
+use crate::error::{Error, Result};
 use glam::Vec3;
 use rayon::prelude::*;
 use render::integrator::{LightSampling, RenderSettings};
 use render::pose::Pose;
 use render::silhouette::ReferenceMask;
-use render::{RenderError, Result};
 
 use super::lighting::{
     FitRequest, LightingFit, LightingPurpose, Smoothness, env_from_texels, fit_lighting, lighting_report,
@@ -93,7 +93,7 @@ pub(super) fn search_pose(
     };
     let o = &settings.orientation;
     if o.starts_deg.is_empty() {
-        return Err(RenderError::value("starts", "at least one orientation start is needed"));
+        return Err(Error::invalid("starts", "at least one orientation start is needed"));
     }
     // The objective's smoothness weight (applied by the linear solve) while
     // the pose is searched: a detailed map would explain a misplaced texture

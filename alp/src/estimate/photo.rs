@@ -3,9 +3,9 @@
 //! photo box-filtered when its mask holds more pixels than time and memory
 //! allow. Everything after this stage reads the photo through [`Photo`].
 
+use crate::error::{Error, Result};
 use render::camera::Camera;
 use render::image_io::{Mask, RgbImage};
-use render::{RenderError, Result};
 
 use super::settings::PhotoSettings;
 
@@ -24,19 +24,19 @@ impl Photo {
     pub fn new(image: RgbImage, mask: Mask, camera: Camera) -> Result<Self> {
         let (w, h) = (camera.width as usize, camera.height as usize);
         if (image.width, image.height) != (w, h) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "image",
                 format!("is {}x{} but the camera is {w}x{h}", image.width, image.height),
             ));
         }
         if (mask.width, mask.height) != (w, h) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "mask",
                 format!("is {}x{} but the camera is {w}x{h}", mask.width, mask.height),
             ));
         }
         if mask.count() < 16 {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "mask",
                 format!("marks {} pixels: too few to estimate anything from", mask.count()),
             ));
@@ -46,7 +46,7 @@ impl Photo {
             .iter()
             .any(|p| p.iter().any(|c| !c.is_finite() || *c < 0.0))
         {
-            return Err(RenderError::value("image", "holds NaN, infinite or negative radiance"));
+            return Err(Error::invalid("image", "holds NaN, infinite or negative radiance"));
         }
         Ok(Photo { image, mask, camera })
     }
@@ -71,7 +71,7 @@ impl Photo {
         };
         let (bw, bh) = (blocks(w), blocks(h));
         if bw == 0 || bh == 0 || clipped.len() != w * h {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "downsampling",
                 format!(
                     "factor {factor} for {w}x{h} pixels ({} clipped flags): not at least 1, or no whole square",

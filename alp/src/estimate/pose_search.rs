@@ -7,8 +7,8 @@
 
 use std::time::Instant;
 
+use crate::error::Result;
 use glam::Vec3;
-use render::Result;
 use render::camera::Camera;
 use render::integrator::{LightSampling, RenderSettings};
 use render::mesh::Mesh;

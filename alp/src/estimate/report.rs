@@ -121,6 +121,9 @@ pub struct PhaseReport {
     pub psnr_db: Option<f64>,
     /// The pose a pose phase ended at.
     pub pose: Option<PoseRecord>,
+    /// Why the phase's solver stopped (a spent budget or a failed line
+    /// search keeps the best point found).
+    pub termination: Option<String>,
     /// The process's resident memory as the phase ended, MB (where the
     /// system tells it): flat from one phase of a kind to the next.
     pub resident_mb: Option<f64>,

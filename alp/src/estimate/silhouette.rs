@@ -8,6 +8,7 @@
 
 use std::time::Instant;
 
+use crate::error::{Error, Result};
 use autodiff::Tape;
 use glam::Quat;
 use optim::schedule::Cosine;
@@ -19,7 +20,6 @@ use render::lookup::ImageVars;
 use render::pose::Pose;
 use render::posed::{POSE_PARAMS, PoseVars, PosedMesh, pack_pose, unpack_pose};
 use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
-use render::{RenderError, Result};
 
 use super::photo::{Photo, usable_pixel};
 use super::report::{PhaseReport, PoseRecord, resident_mb};
@@ -98,7 +98,7 @@ pub(super) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps, outline: &Ou
         PoseSteps::Full => (1.0, 1.0),
         PoseSteps::Polish => (outline.polish_step, outline.polish_last),
     };
-    let anneal = Cosine::new(iters.max(1), last).map_err(|e| RenderError::value("pose optimiser", e.to_string()))?;
+    let anneal = Cosine::new(iters.max(1), last).map_err(Error::solver("pose optimiser"))?;
     let group = |range, step: f64| ParamGroup::new(range, factor * step).schedule(anneal);
     Adam::builder(POSE_PARAMS)
         .group(group(0..4, outline.adam_steps[0]))
@@ -106,11 +106,11 @@ pub(super) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps, outline: &Ou
         .group(group(7..8, outline.adam_steps[2]))
         .max_iters(iters)
         .build()
-        .map_err(|e| RenderError::value("pose optimiser", e.to_string()))
+        .map_err(Error::solver("pose optimiser"))
 }
 
 /// Adam over the pose parameters from `start`: each evaluation records the
-/// objective with `record(tape, pose, evaluation)` on a fresh f64 tape and
+/// objective with `record(tape, pose, evaluation)` on a cleared f64 tape and
 /// reports every term's value (and, every `OutlineSettings::gradient_norm_every`
 /// evaluations and at the last, its gradient norm). A failed evaluation
 /// (the probe left the view) ends the phase with its error.
@@ -129,8 +129,10 @@ where
     let t0 = Instant::now();
     let mut adam = pose_adam(iters, depth, steps, outline)?;
     let (mut evals, mut failure, mut per_iteration) = (0usize, None, Vec::with_capacity(iters + 1));
+    // One tape, cleared for each evaluation: its buffers are reused.
+    let tape = Tape::<f64>::new();
     let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
-        let tape = Tape::<f64>::new();
+        tape.clear();
         let pose_vars = PoseVars::new(&tape, x, true);
         let result = record(&tape, &pose_vars, evals).and_then(|evaluation| {
             // Adam evaluates once per iteration and once more at the end.
@@ -158,9 +160,9 @@ where
     };
     let state = adam
         .minimize(&mut objective, pack_pose(&start).to_vec())
-        .map_err(|e| RenderError::value(format!("{name} phase"), e.to_string()))?;
+        .map_err(Error::solver(format!("{name} phase")))?;
     if state.best_value.is_nan() {
-        return Err(failure.unwrap_or_else(|| RenderError::value(format!("{name} phase"), "no finite loss")));
+        return Err(failure.unwrap_or_else(|| Error::invalid(format!("{name} phase"), "no finite loss")));
     }
     let loss = per_iteration
         .last()
@@ -176,6 +178,7 @@ where
         per_iteration,
         psnr_db: None,
         pose: Some(PoseRecord::from(&pose)),
+        termination: state.termination.as_ref().map(ToString::to_string),
         resident_mb: resident_mb(),
     };
     Ok((pose, state.best_value, report))
@@ -310,7 +313,7 @@ pub(super) fn fit_pose_to_image(
             };
             let hits = PrimaryHits::trace(&ctx.probe.asset.mesh, &posed.position_values(), &photo.camera, &rs);
             if hits.is_empty() {
-                return Err(RenderError::value("pose", "the probe left the camera's view"));
+                return Err(Error::invalid("pose", "the probe left the camera's view"));
             }
             let env_vars = ImageVars::env(tape, env, false);
             let rendered = light_samples(

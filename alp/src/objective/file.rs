@@ -11,7 +11,9 @@ use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, Visitor};
 use serde_json::value::RawValue;
 
-use render::{RenderError, Result};
+use render::RenderError;
+
+use crate::error::Result;
 
 use super::{
     Barycenter, Chamfer, DecayShape, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, RgbVariant, Weight,
@@ -198,14 +200,14 @@ impl TermSpec {
             )
         };
         if self.term != TermKind::RgbL1 && self.variant.is_some() {
-            return Err(misplaced("variant", "rgb_l1"));
+            return Err(misplaced("variant", "rgb_l1").into());
         }
         if self.term != TermKind::LightSmoothness {
             if self.sigma_deg.is_some() {
-                return Err(misplaced("sigma_deg", "light_smoothness"));
+                return Err(misplaced("sigma_deg", "light_smoothness").into());
             }
             if self.directions.is_some() {
-                return Err(misplaced("directions", "light_smoothness"));
+                return Err(misplaced("directions", "light_smoothness").into());
             }
         }
         let weight = self.weight.unwrap_or(Weight::Constant(1.0));
@@ -223,7 +225,7 @@ impl TermSpec {
                 let term = self.directions.map_or(term, |n| term.directions(n));
                 term.validate().map_err(|e| {
                     let key = e.field_name().unwrap_or("sigma_deg");
-                    source.field_error(index, raw, key, e.rule())
+                    source.field_error(index, raw, key, &e.rule())
                 })?;
                 term.weight(weight)
             }

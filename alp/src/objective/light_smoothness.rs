@@ -5,10 +5,10 @@
 
 use std::f32::consts::PI;
 
+use crate::error::{Error, Result};
 use autodiff::{Var, Vec3 as Vec3Var};
 use glam::Vec3;
 use render::sampling::{Frame, Rng, sample_uniform_sphere};
-use render::{RenderError, Result};
 
 use super::{Term, TermContext};
 
@@ -57,13 +57,13 @@ impl LightSmoothness {
     /// Fails unless sigma is in (0, 90] degrees and there is a direction.
     pub fn validate(&self) -> Result<()> {
         if !(self.sigma_deg > 0.0 && self.sigma_deg <= 90.0) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "sigma_deg",
                 format!("{} must be in (0, 90] degrees", self.sigma_deg),
             ));
         }
         if self.directions == 0 {
-            return Err(RenderError::value("directions", "must be at least 1"));
+            return Err(Error::invalid("directions", "must be at least 1"));
         }
         Ok(())
     }

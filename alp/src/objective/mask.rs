@@ -1,8 +1,8 @@
 //! `L_mask`: L1 on masks plus a Chamfer loss on masks, rendered soft mask
 //! against the photo's (`render::silhouette`).
 
+use crate::error::Result;
 use autodiff::Var;
-use render::Result;
 
 use super::{Term, TermContext};
 
@@ -17,7 +17,7 @@ impl Term for MaskL1 {
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {
-        ctx.soft_mask.map(|soft| soft.mask_l1(ctx.reference)).transpose()
+        Ok(ctx.soft_mask.map(|soft| soft.mask_l1(ctx.reference)).transpose()?)
     }
 }
 

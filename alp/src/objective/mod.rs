@@ -36,13 +36,13 @@ mod weight;
 
 use std::any::Any;
 
+use crate::error::{Error, Result};
 use autodiff::{Tape, Var};
 use glam::Quat;
 use render::camera::Camera;
 use render::lookup::ImageVars;
 use render::posed::PoseVars;
 use render::silhouette::{ReferenceMask, SoftMask};
-use render::{RenderError, Result};
 use serde::Serialize;
 
 pub use light_smoothness::LightSmoothness;
@@ -145,16 +145,16 @@ impl<'a, 't> ImageTerms<'a, 't> {
             lens[4]
         );
         if let Some(w) = weight.iter().find(|w| !(w.is_finite() && **w >= 0.0)) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "weight",
                 format!("data weight {w} must be finite and >= 0"),
             ));
         }
         if target.iter().flatten().any(|t| !(t.is_finite() && *t >= 0.0)) {
-            return Err(RenderError::value("target", "holds NaN, infinite or negative radiance"));
+            return Err(Error::invalid("target", "holds NaN, infinite or negative radiance"));
         }
         if !(level.is_finite() && level > 0.0) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "level",
                 format!("the photo's mean luminance {level} must be finite and > 0"),
             ));
@@ -321,11 +321,11 @@ impl Objective {
     /// Fails on an objective without terms or with an invalid weight.
     pub fn validate(&self) -> Result<()> {
         if self.terms.is_empty() {
-            return Err(RenderError::value("objective", "has no terms"));
+            return Err(Error::invalid("objective", "has no terms"));
         }
         for t in &self.terms {
             t.weight.validate().map_err(|e| {
-                RenderError::value(
+                Error::invalid(
                     format!("{} {}", t.term.name(), e.field_name().unwrap_or("weight")),
                     e.rule(),
                 )
@@ -354,7 +354,7 @@ impl Objective {
     pub fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Evaluation<'t>> {
         self.validate()?;
         if !(0.0..=1.0).contains(&ctx.progress) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "progress",
                 format!("{} must be in [0, 1] (the fraction of the run done)", ctx.progress),
             ));
@@ -365,7 +365,7 @@ impl Objective {
             let Some(value) = t.term.evaluate(ctx)? else { continue };
             let name = t.term.name();
             if value.len() != 1 {
-                return Err(RenderError::value(
+                return Err(Error::invalid(
                     format!("term `{name}`"),
                     format!("returned {} values; a term is a scalar", value.len()),
                 ));
@@ -383,7 +383,7 @@ impl Objective {
         }
         if terms.is_empty() {
             let names: Vec<&str> = self.terms.iter().map(|t| t.term.name()).collect();
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "objective",
                 format!(
                     "none of its terms ({}) applies: the phase records none of their inputs",
@@ -415,7 +415,7 @@ impl<'t> Evaluation<'t> {
     /// Fails when one of `wrt` is not differentiated (a constant).
     pub fn gradient_norms(&self, wrt: &[Var<'t, f64>]) -> Result<Vec<f64>> {
         if let Some(k) = wrt.iter().position(|v| !v.requires_grad()) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "gradient norms",
                 format!("variable {k} is a constant: gradients are taken with respect to leaves"),
             ));

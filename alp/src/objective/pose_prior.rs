@@ -2,8 +2,8 @@
 //! regularization, which the paper decays to zero during the run (give
 //! these terms a [`Weight::decay_to_zero`](super::Weight::decay_to_zero)).
 
+use crate::error::Result;
 use autodiff::Var;
-use render::Result;
 
 use super::{Term, TermContext};
 

@@ -2,9 +2,9 @@
 //! probe's pixels (inside the mask). In HDR a plain L1 is dominated by the
 //! few highlight pixels, so the variants compress the range first.
 
+use crate::error::{Error, Result};
 use autodiff::Var;
 use render::image_io::{Mask, RgbImage};
-use render::{RenderError, Result};
 use serde::Deserialize;
 
 use super::{Term, TermContext};
@@ -19,7 +19,7 @@ pub fn luminance(rgb: [f64; 3]) -> f64 {
 /// mask is empty.
 pub fn mask_mean_luminance(image: &RgbImage, mask: &Mask) -> Result<f64> {
     if (image.width, image.height) != (mask.width, mask.height) {
-        return Err(RenderError::value(
+        return Err(Error::invalid(
             "mask",
             format!(
                 "is {}x{} but the image is {}x{}",
@@ -28,7 +28,7 @@ pub fn mask_mean_luminance(image: &RgbImage, mask: &Mask) -> Result<f64> {
         ));
     }
     if mask.count() == 0 {
-        return Err(RenderError::value("mask", "is empty: no pixel marks the probe"));
+        return Err(Error::invalid("mask", "is empty: no pixel marks the probe"));
     }
     let sum: f64 = image
         .pixels

@@ -8,7 +8,7 @@
 //! let fixture = Fixture::new()?;
 //! let check = check_term(&Chamfer, &fixture)?;
 //! assert!(check.passes(), "{check}");
-//! # Ok::<(), render::RenderError>(())
+//! # Ok::<(), alp::Error>(())
 //! ```
 
 use autodiff::gradcheck::{GradcheckReport, Input, gradcheck_with};
@@ -24,7 +24,8 @@ use render::posed::{PoseVars, PosedMesh, pack_pose};
 use render::probe::{ProbeAsset, Texture};
 use render::procedural::SodaCan;
 use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
-use render::{RenderError, Result};
+
+use crate::error::{Error, Result};
 
 use super::{ImageTerms, Term, TermContext, mask_mean_luminance};
 use crate::estimate::hypotheses::front_facing;
@@ -285,13 +286,13 @@ pub fn check_term(term: &dyn Term, fixture: &Fixture) -> Result<TermCheck> {
     let value = fixture
         .with_context(&tape, p, e, CHECK_PROGRESS, |ctx| term.evaluate(ctx))??
         .ok_or_else(|| {
-            RenderError::value(
+            Error::invalid(
                 format!("term `{}`", term.name()),
                 "does not apply on the fixture, which records every input",
             )
         })?;
     if value.len() != 1 {
-        return Err(RenderError::value(
+        return Err(Error::invalid(
             format!("term `{}`", term.name()),
             format!("returned {} values; a term is a scalar", value.len()),
         ));

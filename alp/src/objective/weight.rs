@@ -5,7 +5,7 @@
 
 use std::f64::consts::PI;
 
-use render::{RenderError, Result};
+use crate::error::{Error, Result};
 use serde::Deserialize;
 
 /// How a decaying weight falls from its initial value to zero.
@@ -81,10 +81,10 @@ impl Weight {
             Weight::Decay { initial, until, .. } => (initial, until),
         };
         if !(value.is_finite() && value >= 0.0) {
-            return Err(RenderError::value("weight", format!("{value} must be finite and >= 0")));
+            return Err(Error::invalid("weight", format!("{value} must be finite and >= 0")));
         }
         if !(until > 0.0 && until <= 1.0) {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "until",
                 format!("{until} must be in (0, 1]: the fraction of the run at which the weight reaches zero"),
             ));

@@ -12,8 +12,10 @@ pub mod transport;
 
 use std::time::Instant;
 
+use crate::error::{Error, Result};
 use autodiff::Tape;
 use glam::{Vec2, Vec3};
+use optim::Termination;
 use render::bsdf::GgxMetal;
 use render::envmap::{EnvMap, direction_to_uv};
 use render::image_io::RgbImage;
@@ -22,9 +24,8 @@ use render::pose::Pose;
 use render::posed::{PoseVars, PosedMesh, pack_pose};
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
-use render::{RenderError, Result};
 
-pub use solve::{LightingSolve, Smoothness, pyramid, resample, solve};
+pub use solve::{LightingSolve, Smoothness, Solved, pyramid, resample, solve};
 pub use transport::{MAX_TEXELS, Transport};
 
 use super::Probe;
@@ -68,6 +69,8 @@ pub(super) struct LightingFit {
     pub(super) target: Vec<[f64; 3]>,
     pub(super) weight: Vec<f64>,
     pub(super) evaluations: usize,
+    /// Why the (finest level's) solve stopped.
+    pub(super) termination: Option<Termination>,
 }
 
 impl LightingFit {
@@ -112,7 +115,7 @@ impl MapSizes {
         let min_roughness = asset.roughness.image.pixels.iter().map(|p| p[0]).fold(1.0f32, f32::min);
         let work_h = lighting.working_height.unwrap_or_else(|| working_height(min_roughness));
         if work_h == 0 || 2 * work_h * work_h > MAX_TEXELS {
-            return Err(RenderError::value(
+            return Err(Error::invalid(
                 "working height",
                 format!(
                     "{work_h} rows: a working map has 1 to {} rows",
@@ -231,23 +234,23 @@ pub(super) fn fit_lighting(
     let mut row = Vec::new();
     let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::<Vec2>::new(), Vec::<[f32; 3]>::new());
     let (mut direct, mut lit, mut env_sampled) = (Vec::new(), Vec::new(), Vec::new());
+    // The probe and its pose are recorded once; each pass's samples go on
+    // top of them, dropped before the next pass (the tape keeps its buffers).
+    let tape = Tape::<f32>::new();
+    let vars = ProbeVars::new(&tape, probe.asset, false);
+    let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
+    let positions = posed.position_values();
+    let posed_mark = tape.mark();
     for pass in 0..passes {
         let pass_settings = RenderSettings {
             spp: settings.spp.div_ceil(passes),
             seed: settings.seed.wrapping_add((pass as u64) << 32),
         };
-        let tape = Tape::<f32>::new();
-        let vars = ProbeVars::new(&tape, probe.asset, false);
-        let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
-        let mut hits = PrimaryHits::trace(
-            &probe.asset.mesh,
-            &posed.position_values(),
-            &photo.camera,
-            &pass_settings,
-        );
+        tape.reset_to(posed_mark);
+        let mut hits = PrimaryHits::trace(&probe.asset.mesh, &positions, &photo.camera, &pass_settings);
         hits.retain_pixels(|p| pixels.keeps(p, photo.camera.width));
         if hits.is_empty() {
-            return Err(RenderError::value("pose", "the probe left the camera's view"));
+            return Err(Error::invalid("pose", "the probe left the camera's view"));
         }
         if pass == 0 {
             row = vec![u32::MAX; photo.camera.pixel_count()];
@@ -316,11 +319,11 @@ pub(super) fn fit_lighting(
         max_iters,
     };
     let at = |(w, h): (usize, usize)| Transport::new(&segment, &uv, &throughput, hits.pixels.len(), w, h);
-    let (transport, env, evaluations) = match start {
+    let (transport, solved) = match start {
         Some(x0) => {
             let transport = at(size);
-            let (env, evaluations) = solve(&transport, &target, &weight, solve_settings, x0);
-            (transport, env, evaluations)
+            let solved = solve(&transport, &target, &weight, solve_settings, x0)?;
+            (transport, solved)
         }
         None => {
             // Coarse to fine from a constant map at the photo's mean level:
@@ -334,12 +337,16 @@ pub(super) fn fit_lighting(
                 .sum::<f64>()
                 / wsum;
             let levels = pyramid(size, lighting.coarsest_height);
-            let mut x = vec![mean.max(1e-6); levels[0].0 * levels[0].1 * 3];
+            let mut solved = Solved {
+                env: vec![mean.max(1e-6); levels[0].0 * levels[0].1 * 3],
+                evaluations: 0,
+                termination: None,
+            };
             let (mut evaluations, mut previous) = (0, levels[0]);
             let mut transport = None;
             let finest = *levels.last().expect("at least one level");
             for level in levels {
-                let x0 = resample(&x, previous, level);
+                let x0 = resample(&solved.env, previous, level);
                 // The coarser level's transport goes before this one is built.
                 drop(transport.take());
                 let t = at(level);
@@ -351,13 +358,18 @@ pub(super) fn fit_lighting(
                     },
                     ..solve_settings
                 };
-                let (solved, evals) = solve(&t, &target, &weight, level_settings, &x0);
-                (x, previous, transport) = (solved, level, Some(t));
-                evaluations += evals;
+                (solved, previous, transport) = (solve(&t, &target, &weight, level_settings, &x0)?, level, Some(t));
+                evaluations += solved.evaluations;
             }
-            (transport.expect("at least one level"), x, evaluations)
+            solved.evaluations = evaluations;
+            (transport.expect("at least one level"), solved)
         }
     };
+    let Solved {
+        env,
+        evaluations,
+        termination,
+    } = solved;
     let mut rendered = vec![[0.0; 3]; hits.pixels.len()];
     transport.apply(&env, &mut rendered);
     Ok(LightingFit {
@@ -368,6 +380,7 @@ pub(super) fn fit_lighting(
         target,
         weight,
         evaluations,
+        termination,
     })
 }
 
@@ -540,6 +553,7 @@ pub(super) fn lighting_report(name: &str, fit: &LightingFit, started: Instant) -
         per_iteration: Vec::new(),
         psnr_db: Some(fit.psnr_db()),
         pose: None,
+        termination: fit.termination.as_ref().map(ToString::to_string),
         resident_mb: resident_mb(),
     }
 }
@@ -549,7 +563,7 @@ pub(super) fn env_from_texels(texels: &[f64], width: usize, height: usize) -> Re
         .chunks_exact(3)
         .map(|t| [t[0] as f32, t[1] as f32, t[2] as f32])
         .collect();
-    EnvMap::new(width, height, radiance)
+    Ok(EnvMap::new(width, height, radiance)?)
 }
 
 /// A working map (texel-major RGB, `work` = width x height) at the output's

@@ -3,12 +3,13 @@
 //! and a floor for texels the data drive dark; and the map pyramid of a
 //! coarse-to-fine solve.
 
-use optim::{Bounds, Lbfgs, Solver};
+use optim::{Bounds, Lbfgs, Solver, Termination};
 use serde::Serialize;
 
 use glam::Vec2;
 
 use super::transport::{PullBackScratch, Transport, bilinear_taps};
+use crate::error::{Error, Result};
 
 /// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
 /// doubling from `coarsest` (or `size` itself when not larger).
@@ -107,14 +108,15 @@ pub const FLOOR_OF_LEVEL: f64 = 0.02;
 /// linearly past the smoothness's edge): texels the probe sees poorly are
 /// filled from confident neighbours. The bound is
 /// `floor_of_level` times that level.
-/// Returns the env map (texel-major RGB) and the L-BFGS evaluation count.
+/// An error only where L-BFGS refuses its inputs; a solve that stops short
+/// of convergence says how in [`Solved::termination`].
 pub fn solve(
     transport: &Transport,
     target: &[[f64; 3]],
     weight: &[f64],
     settings: LightingSolve,
     x0: &[f64],
-) -> (Vec<f64>, usize) {
+) -> Result<Solved> {
     let (w, h) = (transport.width, transport.height);
     assert_eq!(target.len(), transport.pixels, "solve: one target per pixel");
     assert_eq!(x0.len(), transport.unknowns(), "solve: the start has the wrong size");
@@ -228,14 +230,26 @@ pub fn solve(
         .max_iters(settings.max_iters)
         .grad_tol(1e-12)
         .build()
-        .expect("valid L-BFGS settings");
-    match lbfgs.minimize(&mut objective, y0) {
-        Ok(state) => (
-            state.best_x.iter().zip(&scale).map(|(y, s)| y * s).collect(),
-            state.evals,
-        ),
-        Err(_) => (x0.to_vec(), 0),
-    }
+        .map_err(Error::solver("lighting solve"))?;
+    let state = lbfgs
+        .minimize(&mut objective, y0)
+        .map_err(Error::solver("lighting solve"))?;
+    Ok(Solved {
+        env: state.best_x.iter().zip(&scale).map(|(y, s)| y * s).collect(),
+        evaluations: state.evals,
+        termination: state.termination,
+    })
+}
+
+/// A lighting solve's result.
+pub struct Solved {
+    /// The env map, texel-major RGB.
+    pub env: Vec<f64>,
+    /// L-BFGS objective evaluations.
+    pub evaluations: usize,
+    /// Why L-BFGS stopped (a spent budget or a failed line search keeps the
+    /// best map found).
+    pub termination: Option<Termination>,
 }
 
 /// Two neighbouring texels, the area weight of their difference and the
@@ -308,7 +322,7 @@ mod tests {
         let transport = Transport::new(&segment, &uv, &throughputs, uv.len(), w, h);
         let mut target = vec![[0.0; 3]; uv.len()];
         transport.apply(&truth, &mut target);
-        let (x, evals) = solve(
+        let solved = solve(
             &transport,
             &target,
             &vec![1.0; uv.len()],
@@ -319,9 +333,10 @@ mod tests {
                 max_iters,
             },
             &vec![1.0; w * h * 3],
-        );
-        assert!(evals > 0);
-        for (a, b) in x.iter().zip(&truth) {
+        )
+        .expect("a solve");
+        assert!(solved.evaluations > 0);
+        for (a, b) in solved.env.iter().zip(&truth) {
             assert!((a - b).abs() < 1e-3, "{a} vs {b}");
         }
     }
@@ -346,13 +361,15 @@ mod tests {
                 floor_of_level,
                 max_iters: 500,
             };
-            let (x, _) = solve(
+            let x = solve(
                 &transport,
                 &target,
                 &vec![1.0; uv.len()],
                 settings,
                 &vec![1.0; w * h * 3],
-            );
+            )
+            .expect("a solve")
+            .env;
             [x[27], x[28], x[29]]
         };
         for v in dark(0.0) {
@@ -439,7 +456,9 @@ mod tests {
                 floor_of_level: 0.0,
                 max_iters: 2000,
             };
-            let (x, _) = solve(&transport, &target, &vec![1.0; w * h], settings, &vec![2.0; w * h * 3]);
+            let x = solve(&transport, &target, &vec![1.0; w * h], settings, &vec![2.0; w * h * 3])
+                .expect("a solve")
+                .env;
             (x.iter().zip(&truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / x.len() as f64).sqrt()
         };
         let (quadratic, edged) = (error(0.0), error(0.05));
