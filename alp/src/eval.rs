@@ -13,7 +13,6 @@ use render::image_io::Mask;
 use render::pose::Pose;
 
 use crate::error::Result;
-
 use crate::relight::{RelightSettings, RelitSpheres, Sphere, evaluation_region, relight};
 
 /// The angle in degrees between two RGB vectors.

@@ -2,9 +2,10 @@
 
 use std::path::Path;
 
-use crate::error::{Error, Result};
 use render::probe::ProbeAsset;
 use render::procedural::{SodaCan, ThermosCap, UvSphere};
+
+use crate::error::{Error, Result};
 
 /// The procedural probes `alp probe make` writes.
 pub const PROCEDURAL: [&str; 3] = ["can", "cap", "sphere"];

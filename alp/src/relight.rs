@@ -25,11 +25,12 @@ use std::f32::consts::FRAC_1_PI;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-use crate::error::{Error, Result};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 use render::sampling::{EnvSampler, Frame, Rng, ggx};
+
+use crate::error::{Error, Result};
 
 /// Width and height of each sphere's render, pixels.
 pub const SPHERE_IMAGE_SIZE: u32 = 256;

@@ -28,5 +28,6 @@ pub mod probe;
 pub mod procedural;
 pub mod sampling;
 pub mod silhouette;
+pub mod transport;
 
 pub use error::{RenderError, Result};

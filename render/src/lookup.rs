@@ -5,6 +5,7 @@
 //! weights).
 
 use autodiff::{Real, Tape, Var, Vec3 as Vec3Var};
+use glam::Vec2;
 
 use crate::envmap::EnvMap;
 use crate::image_io::RgbImage;
@@ -221,6 +222,26 @@ impl<'t, T: Real> TextureVars<'t, T> {
     }
 }
 
+/// The four texels and weights of an env map's bilinear lookup at map
+/// coordinates `uv` (FORMATS.md: texel centres at +0.5, wrap in u, clamp in
+/// v), without a tape: what [`ImageVars::env_radiance`] reads, for the light
+/// transport.
+pub fn env_taps(uv: Vec2, width: usize, height: usize) -> ([u32; 4], [f32; 4]) {
+    let x = uv.x * width as f32 - 0.5;
+    let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let c0 = (x0 as i64).rem_euclid(width as i64) as usize;
+    let c1 = (c0 + 1) % width;
+    let r0 = y0 as usize;
+    let r1 = (r0 + 1).min(height - 1);
+    let t = |r: usize, c: usize| (r * width + c) as u32;
+    (
+        [t(r0, c0), t(r0, c1), t(r1, c0), t(r1, c1)],
+        [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -372,5 +393,22 @@ mod tests {
             r * g + b
         });
         assert!(report.worst_rel_error < 1e-6, "{report}");
+    }
+
+    #[test]
+    fn env_taps_reproduce_the_map_s_lookup() {
+        let (w, h) = (16, 8);
+        let texels: Vec<[f32; 3]> = (0..w * h).map(|i| [i as f32, (i % 5) as f32, 1.0]).collect();
+        let env = EnvMap::new(w, h, texels.clone()).expect("env");
+        for k in 0..200 {
+            let d = uv_to_direction(glam::Vec2::new((k as f32 * 0.37).fract(), (k as f32 * 0.61).fract()));
+            let (t, wt) = env_taps(crate::envmap::direction_to_uv(d), w, h);
+            let got: f32 = t.iter().zip(&wt).map(|(&t, &wt)| texels[t as usize][0] * wt).sum();
+            assert!(
+                (got - env.lookup(d)[0]).abs() < 1e-3,
+                "{d}: {got} vs {}",
+                env.lookup(d)[0]
+            );
+        }
     }
 }

@@ -6,7 +6,6 @@
 //! towards the view ray, a sway across it, a change of size, the outline's
 //! look-alikes.
 
-use crate::error::{Error, Result};
 use glam::{Mat3, Quat, Vec2, Vec3};
 use render::camera::Camera;
 use render::image_io::Mask;
@@ -14,6 +13,7 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 
 use super::settings::HypothesisSettings;
+use crate::error::{Error, Result};
 
 /// The canonical front-facing orientation for `camera`: the probe standing
 /// upright in the world (mesh +Y along the camera's `up`, which FORMATS.md

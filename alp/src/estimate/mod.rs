@@ -33,7 +33,6 @@ pub mod symmetry;
 
 use std::time::Instant;
 
-use crate::error::{Error, Result};
 use glam::Vec3;
 use render::bsdf::GgxMetal;
 use render::integrator::{RenderSettings, render_image};
@@ -53,6 +52,8 @@ use lighting::{MapSizes, env_from_texels, final_fit, lighting_report, output_map
 use orientation::search_pose;
 use pose_search::PhotoJudge;
 use report::{PhaseLog, WorkingImage};
+
+use crate::error::{Error, Result};
 
 /// The probe's mesh, material and topology, prepared once.
 pub(super) struct Probe<'a> {

@@ -10,7 +10,6 @@
 
 use std::time::Instant;
 
-use crate::error::{Error, Result};
 use glam::Vec3;
 use rayon::prelude::*;
 use render::integrator::{LightSampling, RenderSettings};
@@ -28,6 +27,7 @@ use super::silhouette::{
     PoseContext, PoseSteps, fit_pose_to_image, fit_silhouette, polish_silhouette, refit_silhouette, silhouette_loss,
 };
 use super::{Probe, hypotheses};
+use crate::error::{Error, Result};
 use crate::objective::mask_mean_luminance;
 
 /// What the pose search found: the pose, every axis hypothesis's and

@@ -3,11 +3,11 @@
 //! photo box-filtered when its mask holds more pixels than time and memory
 //! allow. Everything after this stage reads the photo through [`Photo`].
 
-use crate::error::{Error, Result};
 use render::camera::Camera;
 use render::image_io::{Mask, RgbImage};
 
 use super::settings::PhotoSettings;
+use crate::error::{Error, Result};
 
 /// The photo and what is known about it.
 pub struct Photo {

@@ -7,7 +7,6 @@
 
 use std::time::Instant;
 
-use crate::error::Result;
 use glam::Vec3;
 use render::camera::Camera;
 use render::integrator::{LightSampling, RenderSettings};
@@ -22,6 +21,7 @@ use super::photo::{Photo, Pixels};
 use super::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
 use super::settings::Settings;
 use super::{Probe, hypotheses};
+use crate::error::Result;
 
 /// The lean (degrees) that maximises `score` within `reach` either way,
 /// by a line search: leans of 0 and of `step` either way; while one side

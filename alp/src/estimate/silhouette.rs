@@ -8,7 +8,6 @@
 
 use std::time::Instant;
 
-use crate::error::{Error, Result};
 use autodiff::Tape;
 use glam::Quat;
 use optim::schedule::Cosine;
@@ -25,6 +24,7 @@ use super::photo::{Photo, usable_pixel};
 use super::report::{PhaseReport, PoseRecord, resident_mb};
 use super::settings::{OutlineSettings, Settings};
 use super::{Probe, hypotheses};
+use crate::error::{Error, Result};
 use crate::objective::{Evaluation, ImageTerms, Objective, TermContext, TermReport};
 
 /// What one evaluation of the objective during a pose phase sees besides

@@ -5,12 +5,12 @@
 
 use std::f32::consts::PI;
 
-use crate::error::{Error, Result};
 use autodiff::{Var, Vec3 as Vec3Var};
 use glam::Vec3;
 use render::sampling::{Frame, Rng, sample_uniform_sphere};
 
 use super::{Term, TermContext};
+use crate::error::{Error, Result};
 
 /// The random stream of the directions (any fixed number: other samplers
 /// seeded alike draw other numbers).

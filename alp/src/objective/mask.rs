@@ -1,10 +1,10 @@
 //! `L_mask`: L1 on masks plus a Chamfer loss on masks, rendered soft mask
 //! against the photo's (`render::silhouette`).
 
-use crate::error::Result;
 use autodiff::Var;
 
 use super::{Term, TermContext};
+use crate::error::Result;
 
 /// Mean absolute difference of the soft mask and the photo's mask over the
 /// image. Applies when the phase records the soft mask.

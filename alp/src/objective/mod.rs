@@ -36,7 +36,6 @@ mod weight;
 
 use std::any::Any;
 
-use crate::error::{Error, Result};
 use autodiff::{Tape, Var};
 use glam::Quat;
 use render::camera::Camera;
@@ -44,6 +43,8 @@ use render::lookup::ImageVars;
 use render::posed::PoseVars;
 use render::silhouette::{ReferenceMask, SoftMask};
 use serde::Serialize;
+
+use crate::error::{Error, Result};
 
 pub use light_smoothness::LightSmoothness;
 pub use mask::{Chamfer, MaskL1};

@@ -2,10 +2,10 @@
 //! regularization, which the paper decays to zero during the run (give
 //! these terms a [`Weight::decay_to_zero`](super::Weight::decay_to_zero)).
 
-use crate::error::Result;
 use autodiff::Var;
 
 use super::{Term, TermContext};
+use crate::error::Result;
 
 /// Squared distance between the barycenters of the rendered soft mask and
 /// of the photo's mask, in image diagonals: its gradient pulls the probe

@@ -2,12 +2,12 @@
 //! probe's pixels (inside the mask). In HDR a plain L1 is dominated by the
 //! few highlight pixels, so the variants compress the range first.
 
-use crate::error::{Error, Result};
 use autodiff::Var;
 use render::image_io::{Mask, RgbImage};
 use serde::Deserialize;
 
 use super::{Term, TermContext};
+use crate::error::{Error, Result};
 
 /// Luminance of linear Rec. 709 RGB.
 pub fn luminance(rgb: [f64; 3]) -> f64 {

@@ -5,7 +5,6 @@
 
 use std::f64::consts::PI;
 
-use crate::error::{Error, Result};
 use serde::Deserialize;
 
 /// How a decaying weight falls from its initial value to zero.
@@ -39,6 +38,8 @@ pub enum Weight {
         shape: DecayShape,
     },
 }
+
+use crate::error::{Error, Result};
 
 impl Weight {
     /// Linear decay from `initial` to zero at progress `until` (a fraction of the run).

@@ -8,30 +8,25 @@
 //! model follows.
 
 pub mod solve;
-pub mod transport;
 
 use std::time::Instant;
 
-use crate::error::{Error, Result};
-use autodiff::Tape;
-use glam::{Vec2, Vec3};
 use optim::Termination;
-use render::bsdf::GgxMetal;
-use render::envmap::{EnvMap, direction_to_uv};
+use render::envmap::EnvMap;
 use render::image_io::RgbImage;
-use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use render::integrator::{LightSampling, PrimaryHits, RenderSettings};
 use render::pose::Pose;
-use render::posed::{PoseVars, PosedMesh, pack_pose};
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
+pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
 pub use solve::{LightingSolve, Smoothness, Solved, pyramid, resample, solve};
-pub use transport::{MAX_TEXELS, Transport};
 
 use super::Probe;
 use super::photo::{Photo, Pixels, usable_pixel};
 use super::report::{PhaseReport, resident_mb};
 use super::settings::{LightingSettings, Settings};
+use crate::error::{Error, Result};
 use crate::objective::{DARK_FRACTION, luminance, mask_mean_luminance};
 
 /// What a lighting fit is for.
@@ -220,75 +215,25 @@ pub(super) fn fit_lighting(
         start,
         max_iters,
     } = *request;
-    // Light samples in passes (`spp_per_pass`), each on its own tape:
-    // memory stays that of one pass however many samples the transport
-    // gathers. The first pass's pixels are the data; later passes' samples
-    // join their pixels (averaged over the passes). With MIS a hit has two
-    // light samples (the lying studio can at its true pose, 64 spp: 999 MB
-    // at most with one pass's hits as many as without, 782 MB with half).
+    // Light samples in passes: memory stays that of one pass however many
+    // samples the transport gathers (with MIS a hit has two).
     let passes = settings
         .spp
         .div_ceil(lighting.spp_per_pass(sampling.strategies() * photo.mask.count()))
         .max(1);
-    let mut reference: Option<PrimaryHits> = None;
-    let mut row = Vec::new();
-    let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::<Vec2>::new(), Vec::<[f32; 3]>::new());
-    let (mut direct, mut lit, mut env_sampled) = (Vec::new(), Vec::new(), Vec::new());
-    // The probe and its pose are recorded once; each pass's samples go on
-    // top of them, dropped before the next pass (the tape keeps its buffers).
-    let tape = Tape::<f32>::new();
-    let vars = ProbeVars::new(&tape, probe.asset, false);
-    let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
-    let positions = posed.position_values();
-    let posed_mark = tape.mark();
-    for pass in 0..passes {
-        let pass_settings = RenderSettings {
-            spp: settings.spp.div_ceil(passes),
-            seed: settings.seed.wrapping_add((pass as u64) << 32),
-        };
-        tape.reset_to(posed_mark);
-        let mut hits = PrimaryHits::trace(&probe.asset.mesh, &positions, &photo.camera, &pass_settings);
-        hits.retain_pixels(|p| pixels.keeps(p, photo.camera.width));
-        if hits.is_empty() {
-            return Err(Error::invalid("pose", "the probe left the camera's view"));
-        }
-        if pass == 0 {
-            row = vec![u32::MAX; photo.camera.pixel_count()];
-            hits.pixels
-                .iter()
-                .enumerate()
-                .for_each(|(k, &p)| row[p as usize] = k as u32);
-        }
-        let samples = light_samples_with(
-            &tape,
-            &hits,
-            &photo.camera,
-            &vars,
-            &posed,
-            &probe.asset.mesh.triangles,
-            &GgxMetal,
-            sampling,
-        );
-        let d = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
-        let tp = samples.throughput.map(|t| tape.to_vec(t));
-        let pass_lit = tape.to_vec(samples.lit);
-        let pass_segment = tape.to_vec(samples.segment);
-        for (i, &seg) in pass_segment.iter().enumerate() {
-            let r = row[hits.pixels[seg as usize] as usize];
-            if r != u32::MAX {
-                segment.push(r);
-                uv.push(direction_to_uv(Vec3::new(d[0][i], d[1][i], d[2][i])));
-                throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
-                direct.push(i < samples.direct);
-                lit.push(pass_lit[i] > 0.5);
-                env_sampled.push(samples.env_sampled[i]);
-            }
-        }
-        if pass == 0 {
-            reference = Some(hits);
-        }
-    }
-    let hits = reference.expect("at least one pass");
+    let camera = &photo.camera;
+    let keep = |p: u32| pixels.keeps(p, camera.width);
+    let record = SampleRecord::trace(probe.asset, pose, camera, settings, sampling, passes, keep)?;
+    let SampleRecord {
+        hits,
+        row,
+        segment,
+        uv,
+        throughput,
+        direct,
+        lit,
+        env_sampled,
+    } = record;
     let (target, mut weight) = pixel_targets(photo, &hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
         let shares = LitShares::new(&segment, &direct, &lit, &env_sampled, hits.pixels.len());

@@ -8,7 +8,9 @@ use serde::Serialize;
 
 use glam::Vec2;
 
-use super::transport::{PullBackScratch, Transport, bilinear_taps};
+use render::lookup::env_taps;
+use render::transport::{PullBackScratch, Transport};
+
 use crate::error::{Error, Result};
 
 /// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
@@ -34,7 +36,7 @@ pub fn resample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec
         for c in 0..to.0 {
             let u = (c as f32 + 0.5) / to.0 as f32;
             let v = (r as f32 + 0.5) / to.1 as f32;
-            let (taps, weights) = bilinear_taps(Vec2::new(u, v), from.0, from.1);
+            let (taps, weights) = env_taps(Vec2::new(u, v), from.0, from.1);
             for ch in 0..3 {
                 out.push(
                     taps.iter()

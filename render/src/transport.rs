@@ -1,11 +1,26 @@
-//! The light transport at a fixed pose: each light sample reads four texels
-//! of the env map (bilinear) with a throughput. Recorded once, the sparse
-//! operator from texels to pixels and its transpose make the lighting solve
-//! cheap sparse products instead of renders.
+//! The light transport at a fixed pose: the image is linear in the env map.
+//! Each light sample reads four texels of the map (bilinear, the taps of
+//! [`crate::lookup`]) with a throughput; [`SampleRecord`] traces and keeps
+//! the samples once, in passes as the renderer takes them, and
+//! [`Transport`] is the sparse operator from texels to pixels they make at
+//! any map size, with its transpose: a lighting solve becomes cheap sparse
+//! products instead of renders.
 
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use lanes::F64x4;
 use rayon::prelude::*;
+
+use autodiff::Tape;
+
+use crate::bsdf::GgxMetal;
+use crate::camera::Camera;
+use crate::envmap::direction_to_uv;
+use crate::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use crate::lookup::env_taps;
+use crate::pose::Pose;
+use crate::posed::{PoseVars, PosedMesh, pack_pose};
+use crate::probe::ProbeAsset;
+use crate::{RenderError, Result};
 
 /// One entry of the transport: a texel and the RGB weight with which it
 /// reaches a pixel, in quanta of the pixel's row ([`Transport::new`]).
@@ -21,25 +36,25 @@ use rayon::prelude::*;
 /// [`lanes`]).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(8))]
-pub(super) struct Entry {
+pub(crate) struct Entry {
     /// The RGB weight in quanta, then the texel: one load of four lanes
     /// ([`F64x4::from_entry`]).
-    pub(super) lanes: [u16; 4],
+    pub(crate) lanes: [u16; 4],
 }
 
 impl Entry {
-    pub(super) fn new(index: u16, weight: [u16; 3]) -> Self {
+    pub(crate) fn new(index: u16, weight: [u16; 3]) -> Self {
         Entry {
             lanes: [weight[0], weight[1], weight[2], index],
         }
     }
 
-    pub(super) fn index(&self) -> usize {
+    pub(crate) fn index(&self) -> usize {
         self.lanes[3] as usize
     }
 
     /// The RGB weight in quanta.
-    pub(super) fn quanta(&self) -> [f64; 3] {
+    pub(crate) fn quanta(&self) -> [f64; 3] {
         std::array::from_fn(|c| self.lanes[c] as f64)
     }
 }
@@ -64,36 +79,140 @@ pub struct Transport {
     pub height: usize,
     /// Number of pixels (segments).
     pub pixels: usize,
-    pub(super) row_start: Vec<usize>,
+    pub(crate) row_start: Vec<usize>,
     /// Per pixel, the weight of one quantum of its row's entries.
-    pub(super) quantum: Vec<f32>,
-    pub(super) rows: Vec<Entry>,
+    pub(crate) quantum: Vec<f32>,
+    pub(crate) rows: Vec<Entry>,
+}
+
+/// The light samples of a posed probe, kept for its transport: per sample
+/// its pixel, the map coordinates of its direction, its throughput (the
+/// mean over the passes) and how it came about.
+pub struct SampleRecord {
+    /// The first pass's primary hits: the pixels the samples belong to.
+    pub hits: PrimaryHits,
+    /// Per image pixel, its index in `hits.pixels` (`u32::MAX`: none).
+    pub row: Vec<u32>,
+    /// Per sample, its pixel (an index into `hits.pixels`).
+    pub segment: Vec<u32>,
+    /// Per sample, the map coordinates of the direction it reads.
+    pub uv: Vec<Vec2>,
+    /// Per sample, its RGB throughput over the passes.
+    pub throughput: Vec<[f32; 3]>,
+    /// Per sample, whether it is a hit's own (else its bounce's, one step of
+    /// inter-reflection).
+    pub direct: Vec<bool>,
+    /// Per sample, whether it reaches the env map (not the probe).
+    pub lit: Vec<bool>,
+    /// Per sample, whether the env map's sampler drew it (else the BRDF's).
+    pub env_sampled: Vec<bool>,
+}
+
+impl SampleRecord {
+    /// The light samples of `asset` at `pose` seen by `camera`: `settings.spp`
+    /// per pixel, drawn by `sampling` in `passes` passes (each its own
+    /// stratified set and seed; a pass's samples are dropped from the tape
+    /// before the next), on the pixels `keep` keeps. The first pass's pixels
+    /// are the data; later passes' samples join their pixels. An error when
+    /// the probe leaves the view.
+    pub fn trace(
+        asset: &ProbeAsset,
+        pose: &Pose,
+        camera: &Camera,
+        settings: &RenderSettings,
+        sampling: &LightSampling,
+        passes: u32,
+        keep: impl Fn(u32) -> bool,
+    ) -> Result<Self> {
+        let mut reference: Option<PrimaryHits> = None;
+        let mut row = Vec::new();
+        let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::<Vec2>::new(), Vec::<[f32; 3]>::new());
+        let (mut direct, mut lit, mut env_sampled) = (Vec::new(), Vec::new(), Vec::new());
+        // The probe and its pose are recorded once; each pass's samples go on
+        // top of them, dropped before the next pass (the tape keeps its buffers).
+        let tape = Tape::<f32>::new();
+        let vars = ProbeVars::new(&tape, asset, false);
+        let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(pose), false));
+        let positions = posed.position_values();
+        let posed_mark = tape.mark();
+        for pass in 0..passes {
+            let pass_settings = RenderSettings {
+                spp: settings.spp.div_ceil(passes),
+                seed: settings.seed.wrapping_add((pass as u64) << 32),
+            };
+            tape.reset_to(posed_mark);
+            let mut hits = PrimaryHits::trace(&asset.mesh, &positions, camera, &pass_settings);
+            hits.retain_pixels(&keep);
+            if hits.is_empty() {
+                return Err(RenderError::value("pose", "the probe left the camera's view"));
+            }
+            if pass == 0 {
+                row = vec![u32::MAX; camera.pixel_count()];
+                hits.pixels
+                    .iter()
+                    .enumerate()
+                    .for_each(|(k, &p)| row[p as usize] = k as u32);
+            }
+            let samples = light_samples_with(
+                &tape,
+                &hits,
+                camera,
+                &vars,
+                &posed,
+                &asset.mesh.triangles,
+                &GgxMetal,
+                sampling,
+            );
+            let d = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
+            let tp = samples.throughput.map(|t| tape.to_vec(t));
+            let pass_lit = tape.to_vec(samples.lit);
+            let pass_segment = tape.to_vec(samples.segment);
+            for (i, &seg) in pass_segment.iter().enumerate() {
+                let r = row[hits.pixels[seg as usize] as usize];
+                if r != u32::MAX {
+                    segment.push(r);
+                    uv.push(direction_to_uv(Vec3::new(d[0][i], d[1][i], d[2][i])));
+                    throughput.push([0, 1, 2].map(|c| tp[c][i] / passes as f32));
+                    direct.push(i < samples.direct);
+                    lit.push(pass_lit[i] > 0.5);
+                    env_sampled.push(samples.env_sampled[i]);
+                }
+            }
+            if pass == 0 {
+                reference = Some(hits);
+            }
+        }
+        Ok(SampleRecord {
+            hits: reference.expect("at least one pass"),
+            row,
+            segment,
+            uv,
+            throughput,
+            direct,
+            lit,
+            env_sampled,
+        })
+    }
+
+    /// The samples' transport onto a `width x height` env map.
+    pub fn transport(&self, width: usize, height: usize) -> Transport {
+        Transport::new(
+            &self.segment,
+            &self.uv,
+            &self.throughput,
+            self.hits.pixels.len(),
+            width,
+            height,
+        )
+    }
 }
 
 /// Pixels per chunk of the transport's construction and transposed sums.
-pub(super) const PIXEL_CHUNK: usize = 2048;
+pub(crate) const PIXEL_CHUNK: usize = 2048;
 
 /// The pixels of chunk `chunk` of `pixels`.
-pub(super) fn pixel_chunk(chunk: usize, pixels: usize) -> std::ops::Range<usize> {
+pub(crate) fn pixel_chunk(chunk: usize, pixels: usize) -> std::ops::Range<usize> {
     chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(pixels)
-}
-
-/// The four texels and weights of a bilinear lookup at map coordinates
-/// `uv` (FORMATS.md: texel centres at +0.5, wrap in u, clamp in v).
-pub fn bilinear_taps(uv: Vec2, width: usize, height: usize) -> ([u32; 4], [f32; 4]) {
-    let x = uv.x * width as f32 - 0.5;
-    let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let c0 = (x0 as i64).rem_euclid(width as i64) as usize;
-    let c1 = (c0 + 1) % width;
-    let r0 = y0 as usize;
-    let r1 = (r0 + 1).min(height - 1);
-    let t = |r: usize, c: usize| (r * width + c) as u32;
-    (
-        [t(r0, c0), t(r0, c1), t(r1, c0), t(r1, c1)],
-        [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
-    )
 }
 
 impl Transport {
@@ -145,7 +264,7 @@ impl Transport {
                         if throughput[k as usize] == [0.0; 3] {
                             continue;
                         }
-                        let (texels, weights) = bilinear_taps(uv[k as usize], width, height);
+                        let (texels, weights) = env_taps(uv[k as usize], width, height);
                         for (&index, &w) in texels.iter().zip(&weights) {
                             if w <= 0.0 {
                                 continue;
@@ -212,14 +331,14 @@ impl Transport {
     }
 
     /// The entries of pixel `p`'s row.
-    pub(super) fn row(&self, p: usize) -> &[Entry] {
+    pub(crate) fn row(&self, p: usize) -> &[Entry] {
         &self.rows[self.row_start[p]..self.row_start[p + 1]]
     }
 
     /// Pixel `p`'s radiance under `env` (RGB and a 0 per texel: see
     /// [`lanes`]). Two sums, of the even and the odd entries: one would
     /// chain every multiply-add of the row on the one before.
-    pub(super) fn render_pixel(&self, p: usize, env: &[[f64; 4]]) -> [f64; 3] {
+    pub(crate) fn render_pixel(&self, p: usize, env: &[[f64; 4]]) -> [f64; 3] {
         let (mut even, mut odd) = (F64x4::ZERO, F64x4::ZERO);
         let mut pairs = self.row(p).chunks_exact(2);
         for pair in &mut pairs {
@@ -297,7 +416,7 @@ impl Transport {
     /// Per texel and channel (texel-major RGB), the sum over the entries
     /// of every pixel of `term(pixel, weight)`, the entry's weight in
     /// radiance units.
-    pub(super) fn texel_sums(&self, term: impl Fn(usize, [f64; 3]) -> [f64; 3] + Sync) -> Vec<f64> {
+    pub(crate) fn texel_sums(&self, term: impl Fn(usize, [f64; 3]) -> [f64; 3] + Sync) -> Vec<f64> {
         let texels = self.width * self.height;
         let mut partial = vec![[0.0; 3]; self.pixels.div_ceil(PIXEL_CHUNK) * texels];
         partial.par_chunks_mut(texels).enumerate().for_each(|(chunk, sums)| {
@@ -339,19 +458,19 @@ impl Transport {
 #[derive(Default)]
 pub struct PullBackScratch {
     /// The env map, four lanes per texel.
-    pub(super) env: Vec<[f64; 4]>,
+    pub(crate) env: Vec<[f64; 4]>,
     /// Per chunk of pixels, the transposed product's sums per texel.
-    pub(super) sums: Vec<[f64; 4]>,
+    pub(crate) sums: Vec<[f64; 4]>,
 }
 
 /// A texel-major RGB map as four lanes per texel, the fourth 0.
-pub(super) fn padded(env: &[f64]) -> impl Iterator<Item = [f64; 4]> + '_ {
+pub(crate) fn padded(env: &[f64]) -> impl Iterator<Item = [f64; 4]> + '_ {
     env.as_chunks::<3>().0.iter().map(|t| [t[0], t[1], t[2], 0.0])
 }
 
 /// Adds the chunks' partial sums (`texels` each, in chunk order) to the
 /// texel-major RGB `total` (the first three lanes of each).
-pub(super) fn add_chunk_sums<const LANES: usize>(partial: &[[f64; LANES]], texels: usize, total: &mut [f64]) {
+pub(crate) fn add_chunk_sums<const LANES: usize>(partial: &[[f64; LANES]], texels: usize, total: &mut [f64]) {
     for sums in partial.chunks_exact(texels) {
         for (t, s) in total.as_chunks_mut::<3>().0.iter_mut().zip(sums) {
             (0..3).for_each(|c| t[c] += s[c]);
@@ -361,7 +480,7 @@ pub(super) fn add_chunk_sums<const LANES: usize>(partial: &[[f64; LANES]], texel
 
 /// `start[k]..start[k + 1]` is where the items of key k go when `keys`
 /// (one per item, each below `count`) are sorted: a counting sort's offsets.
-pub(super) fn key_starts(keys: impl Iterator<Item = usize>, count: usize) -> Vec<usize> {
+pub(crate) fn key_starts(keys: impl Iterator<Item = usize>, count: usize) -> Vec<usize> {
     let mut start = vec![0usize; count + 1];
     keys.for_each(|k| start[k + 1] += 1);
     for k in 0..count {
@@ -479,24 +598,7 @@ mod lanes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use render::envmap::{EnvMap, uv_to_direction};
-
-    #[test]
-    fn taps_reproduce_the_scalar_lookup() {
-        let (w, h) = (16, 8);
-        let texels: Vec<[f32; 3]> = (0..w * h).map(|i| [i as f32, (i % 5) as f32, 1.0]).collect();
-        let env = EnvMap::new(w, h, texels.clone()).expect("env");
-        for k in 0..200 {
-            let d = uv_to_direction(glam::Vec2::new((k as f32 * 0.37).fract(), (k as f32 * 0.61).fract()));
-            let (t, wt) = bilinear_taps(render::envmap::direction_to_uv(d), w, h);
-            let got: f32 = t.iter().zip(&wt).map(|(&t, &wt)| texels[t as usize][0] * wt).sum();
-            assert!(
-                (got - env.lookup(d)[0]).abs() < 1e-3,
-                "{d}: {got} vs {}",
-                env.lookup(d)[0]
-            );
-        }
-    }
+    use crate::envmap::{EnvMap, uv_to_direction};
 
     #[test]
     fn the_transport_renders_what_the_samples_read_and_its_transpose_is_its_adjoint() {
@@ -573,7 +675,7 @@ mod tests {
         transport.apply(&env, &mut rendered);
         let mut exact = vec![[0.0f64; 3]; pixels];
         for ((&p, &uv), t) in segment.iter().zip(&uv).zip(&throughput) {
-            let (texels, weights) = bilinear_taps(uv, w, h);
+            let (texels, weights) = env_taps(uv, w, h);
             for (&texel, &wt) in texels.iter().zip(&weights) {
                 (0..3).for_each(|c| exact[p as usize][c] += t[c] as f64 * wt as f64 * env[texel as usize * 3 + c]);
             }
