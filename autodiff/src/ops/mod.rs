@@ -3,10 +3,14 @@
 //! Elementwise ops broadcast length-1 arrays; any other length mismatch
 //! panics with the op's name and both shapes.
 
+mod concat;
 pub mod custom;
+mod gather;
+mod index;
 pub(crate) mod map;
-mod reduce;
-mod shape;
+mod scatter_add;
+mod slice;
+mod sum;
 
 #[cfg(test)]
 mod tests;
@@ -174,6 +178,16 @@ impl<'t, T: Real> Var<'t, T> {
     /// With `self` a mask: `a` where the mask is non-zero, `b` elsewhere.
     pub fn select(self, a: Self, b: Self) -> Self {
         Self::map(MapKind::Select, [T::zero(); 2], &[self, a, b])
+    }
+    /// A length-1 array repeated `len` times. Adjoint: the sum of the output's.
+    pub fn broadcast(self, len: usize) -> Self {
+        assert!(
+            self.len() == 1 || self.len() == len,
+            "broadcast: shape mismatch: cannot broadcast shape [{}] to [{len}]",
+            self.len()
+        );
+        self.tape
+            .record(Op::Map(MapKind::Identity, [T::zero(); 2]), len, &[self])
     }
     /// The same values with the gradient cut.
     pub fn stop_gradient(self) -> Self {
