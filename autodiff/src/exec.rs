@@ -27,7 +27,7 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
-use crate::ops::custom::CustomOp;
+use crate::ops::{add_into, concat, custom, gather, scatter_add, slice, sum};
 use crate::real::Real;
 use crate::tape::{Graph, NONE, Node, NonFinite, Op};
 
@@ -595,7 +595,7 @@ impl<T: Real> Graph<T> {
             let start = ex.group_members.len();
             ex.group_members.push(j as u32);
             for (k, ins) in ex.instrs[i0..].iter().enumerate().skip(j + 1) {
-                if ex.group_members.len() - start == GATHER_GROUP {
+                if ex.group_members.len() - start == gather::GROUP {
                     break;
                 }
                 if eligible(ins) && same_src(ins.ins[0], lead.ins[0]) && same_src(ins.ins[1], lead.ins[1]) {
@@ -637,25 +637,9 @@ impl<T: Real> Graph<T> {
             &bufs[i.value as usize][..i.len as usize]
         };
         match n.op {
-            Op::Slice(start) => {
-                out_buf.copy_from_slice(&input(0)[start as usize..start as usize + n.len as usize]);
-            }
-            Op::Concat => {
-                let mut at = 0;
-                for k in 0..num {
-                    let x = input(k);
-                    out_buf[at..at + x.len()].copy_from_slice(x);
-                    at += x.len();
-                }
-            }
-            Op::Custom(c) => {
-                let op = &self.customs[c as usize];
-                let mut ins: [&[T]; crate::ops::custom::MAX_INPUTS] = [&[]; crate::ops::custom::MAX_INPUTS];
-                for (k, slot) in ins.iter_mut().enumerate().take(num) {
-                    *slot = input(k);
-                }
-                op.forward(&ins[..num], &mut out_buf);
-            }
+            Op::Slice(start) => slice::forward(input(0), start as usize, &mut out_buf),
+            Op::Concat => concat::forward((0..num).map(input), &mut out_buf),
+            Op::Custom(c) => custom::forward(&*self.customs[c as usize], (0..num).map(input), &mut out_buf),
             _ => unreachable!("only plain ops run as plain steps"),
         }
         if self.check_finite && self.non_finite.is_none() {
@@ -754,55 +738,46 @@ impl<T: Real> Graph<T> {
             }
         }
         let mut adj = std::mem::take(&mut self.adjoints.bufs);
-        let gy = std::mem::take(&mut adj[n.adjoint as usize]);
+        let gy_buf = std::mem::take(&mut adj[n.adjoint as usize]);
         let input_grad = |adj: &mut Vec<Vec<T>>, k: usize| -> Option<Ptr<T>> {
             let i = self.edges[first + k] as usize;
             self.exec.live[i].then(|| Ptr::of(&mut adj[self.nodes[i].adjoint as usize][..self.nodes[i].len as usize]))
         };
+        let gy = &gy_buf[..n.len as usize];
         match n.op {
             Op::Slice(start) => {
                 if let Some(g) = input_grad(&mut adj, 0) {
                     // SAFETY: `g` is the only reference to that buffer.
-                    let g = unsafe { g.slice(start as usize, n.len as usize) };
-                    add_into(g, &gy[..n.len as usize]);
+                    slice::backward(gy, start as usize, unsafe { g.slice(0, g.len) });
                 }
             }
             Op::Concat => {
-                let mut at = 0;
-                for k in 0..num {
+                let parts = (0..num).map(|k| {
                     let len = self.nodes[self.edges[first + k] as usize].len as usize;
-                    if let Some(g) = input_grad(&mut adj, k) {
-                        // SAFETY: as above.
-                        add_into(unsafe { g.slice(0, len) }, &gy[at..at + len]);
-                    }
-                    at += len;
-                }
+                    // SAFETY: concat uses each part's gradient before it takes the next.
+                    (len, input_grad(&mut adj, k).map(|g| unsafe { g.slice(0, len) }))
+                });
+                concat::backward(gy, parts);
             }
             Op::Custom(c) => {
-                let op: &dyn CustomOp<T> = &*self.customs[c as usize];
                 let vals = &self.values.bufs;
-                let mut ins: [&[T]; crate::ops::custom::MAX_INPUTS] = [&[]; crate::ops::custom::MAX_INPUTS];
-                let mut grads: [Option<&mut [T]>; crate::ops::custom::MAX_INPUTS] = Default::default();
-                for k in 0..num {
+                let inputs = (0..num).map(|k| {
                     let i = &self.nodes[self.edges[first + k] as usize];
-                    ins[k] = &vals[i.value as usize][..i.len as usize];
                     // SAFETY: distinct inputs have distinct adjoint buffers; an
                     // input repeated in the list gets its gradient slot once.
                     let repeated = (0..k).any(|j| self.edges[first + j] == self.edges[first + k]);
-                    if !repeated && let Some(g) = input_grad(&mut adj, k) {
-                        grads[k] = Some(unsafe { g.slice(0, i.len as usize) });
-                    }
-                }
-                op.vjp(
-                    &ins[..num],
-                    &vals[n.value as usize][..n.len as usize],
-                    &gy[..n.len as usize],
-                    &mut grads[..num],
-                );
+                    let g = if repeated { None } else { input_grad(&mut adj, k) };
+                    (
+                        &vals[i.value as usize][..i.len as usize],
+                        g.map(|g| unsafe { g.slice(0, i.len as usize) }),
+                    )
+                });
+                let y = &vals[n.value as usize][..n.len as usize];
+                custom::backward(&*self.customs[c as usize], inputs, y, gy);
             }
             _ => unreachable!("only plain ops run as plain steps"),
         }
-        adj[n.adjoint as usize] = gy;
+        adj[n.adjoint as usize] = gy_buf;
         self.adjoints.bufs = adj;
     }
 
@@ -988,10 +963,9 @@ impl<T: Real> Graph<T> {
             let mut k = 0;
             for ins in &ex.instrs[reg.instrs.clone()] {
                 if let Out::Sum(p, a) = ins.out {
-                    let total: f64 = (0..tiles).map(|t| ex.partials[t * reg.sums + p as usize]).sum();
                     // SAFETY: the chunks are done.
                     let v = unsafe { ex.vals[a as usize].slice(0, 1) };
-                    v[0] = T::c(total);
+                    v[0] = sum::finish((0..tiles).map(|t| ex.partials[t * reg.sums + p as usize]));
                     k += 1;
                 }
             }
@@ -1172,18 +1146,12 @@ impl<T: Real> Ctx<'_, T> {
                     let x = self.value(tile, ins.ins[0]);
                     // SAFETY: each tile owns its partials.
                     let partial = unsafe { self.partials.slice(t * self.sums + k as usize, 1) };
-                    partial[0] = sum(x).f64();
+                    partial[0] = sum::forward_tile(x);
                 }
                 Op::ScatterAdd if sinks => {
                     let Out::Scatter(s, a) = ins.out else { unreachable!() };
                     let target = self.accumulator(tile, s, self.vals[a as usize]);
-                    let x = self.value(tile, ins.ins[0]);
-                    let idx = self.value(tile, ins.ins[1]);
-                    check_indices(idx, target.len(), "scatter_add");
-                    for (&x, &i) in x.iter().zip(idx) {
-                        // SAFETY: checked above.
-                        unsafe { *target.get_unchecked_mut(i.to_index_unchecked()) += x };
-                    }
+                    scatter_add::forward_tile(self.value(tile, ins.ins[0]), self.value(tile, ins.ins[1]), target);
                 }
                 _ => {}
             }
@@ -1201,24 +1169,19 @@ impl<T: Real> Ctx<'_, T> {
         };
         // SAFETY: the source is complete and only read.
         let source = unsafe { self.vals[s as usize].slice(0, self.vals[s as usize].len) };
-        let idx = self.value(tile, lead.ins[1]);
-        let mut group: [(usize, usize, &mut [T]); GATHER_GROUP] = std::array::from_fn(|_| (1, 0, &mut [][..]));
-        for (&j, member) in members.iter().zip(&mut group) {
+        let outputs = members.iter().map(|&j| {
             let ins = &self.instrs[j as usize];
             let Op::Gather { stride, offset } = self.nodes[ins.node as usize].op else {
                 unreachable!("a gather group holds gathers")
             };
-            let at = Strided::new(stride, offset, source.len());
-            check_indices(idx, at.count, "gather");
-            *member = (at.stride, at.offset, self.out_mut(tile, ins.out));
-        }
-        let count = members.len();
-        // SAFETY: indices checked above; every slice holds the tile's elements.
-        unsafe { T::gather_unchecked(source, idx, &mut group[..count]) };
+            (stride, offset, self.out_mut(tile, ins.out))
+        });
+        gather::forward_tile(source, self.value(tile, lead.ins[1]), outputs);
         if self.check_finite && nf.is_none() {
-            for (&j, (_, _, y)) in members.iter().zip(&group[..count]) {
-                let node = self.instrs[j as usize].node;
-                if let Some(found) = first_non_finite(y, node, "gather", tile.t0, false) {
+            for &j in members {
+                let ins = &self.instrs[j as usize];
+                let y = self.value(tile, Self::out_src(ins.out));
+                if let Some(found) = first_non_finite(y, ins.node, "gather", tile.t0, false) {
                     *nf = Some(found);
                     break;
                 }
@@ -1266,27 +1229,17 @@ impl<T: Real> Ctx<'_, T> {
                 Op::Sum => {
                     let Out::Sum(_, a) = ins.out else { unreachable!() };
                     // SAFETY: the sum's adjoint exists (it is live) and is only read.
-                    let seed = unsafe { self.adjs[a as usize].slice(0, 1) }[0];
-                    if let Some(g) = self.adjoint(tile, ins.ins[0]) {
-                        if accumulate(0) {
-                            g.iter_mut().for_each(|g| *g += seed);
-                        } else {
-                            g.fill(seed);
-                        }
+                    let gy = unsafe { self.adjs[a as usize].slice(0, 1) }[0];
+                    if let Some(gx) = self.adjoint(tile, ins.ins[0]) {
+                        sum::backward_tile(gy, gx, accumulate(0));
                     }
                 }
                 Op::ScatterAdd => {
                     let Out::Scatter(_, a) = ins.out else { unreachable!() };
                     // SAFETY: as above.
                     let gy = unsafe { self.adjs[a as usize].slice(0, self.adjs[a as usize].len) };
-                    let idx = self.value(tile, ins.ins[1]);
-                    check_indices(idx, gy.len(), "scatter_add");
-                    if let Some(g) = self.adjoint(tile, ins.ins[0]) {
-                        let acc = if accumulate(0) { T::one() } else { T::zero() };
-                        for (g, &i) in g.iter_mut().zip(idx) {
-                            // SAFETY: checked above.
-                            *g = acc.mul_add(*g, unsafe { *gy.get_unchecked(i.to_index_unchecked()) });
-                        }
+                    if let Some(gx) = self.adjoint(tile, ins.ins[0]) {
+                        scatter_add::backward_tile(gy, self.value(tile, ins.ins[1]), gx, accumulate(0));
                     }
                 }
                 Op::Map(kind, p) => {
@@ -1321,30 +1274,21 @@ impl<T: Real> Ctx<'_, T> {
             if scatter || self.adjs[s as usize].ptr.is_null() {
                 continue;
             }
-            let target = self.accumulator(tile, pos as u32, self.adjs[s as usize]);
-            let mut group: [(&[T], &[T], Strided); GATHER_GROUP] = [(&[], &[], Strided::UNIT); GATHER_GROUP];
-            let mut count = 0;
-            for ins in self.instrs {
+            let gathers = self.instrs.iter().filter_map(|ins| {
                 let Op::Gather { stride, offset } = self.nodes[ins.node as usize].op else {
-                    continue;
+                    return None;
                 };
                 if !matches!(ins.ins[0], Src::Array(a) if a == s) || !self.live[ins.node as usize] {
-                    continue;
+                    return None;
                 }
-                let Some(gy) = self.adjoint(tile, Self::out_src(ins.out)) else {
-                    continue;
-                };
-                let idx = self.value(tile, ins.ins[1]);
-                let at = Strided::new(stride, offset, target.len());
-                check_indices(idx, at.count, "gather");
-                group[count] = (idx, gy, at);
-                count += 1;
-                if count == GATHER_GROUP {
-                    scatter_group(target, &group[..count], tile.n);
-                    count = 0;
-                }
-            }
-            scatter_group(target, &group[..count], tile.n);
+                let gy = self.adjoint(tile, Self::out_src(ins.out))?;
+                Some((stride, offset, self.value(tile, ins.ins[1]), &*gy))
+            });
+            gather::backward_tile(
+                self.accumulator(tile, pos as u32, self.adjs[s as usize]),
+                tile.n,
+                gathers,
+            );
         }
         for (b, acc) in bcast_grads.iter_mut().enumerate() {
             if !self.live[self.bcast_nodes[b] as usize] {
@@ -1352,7 +1296,7 @@ impl<T: Real> Ctx<'_, T> {
             }
             // SAFETY: this chunk's scratch.
             let g = unsafe { tile.adjs.slice((self.slots + b) * tl, tile.n) };
-            *acc += sum(g);
+            *acc += sum::tile_sum(g);
         }
     }
 }
@@ -1364,93 +1308,6 @@ fn same_src(a: Src, b: Src) -> bool {
     }
 }
 
-/// Most gathers from one array run (forward) or scatter (backward) in one loop.
-const GATHER_GROUP: usize = 16;
-
-/// target[at(idx[i])] += g[i] for every (idx, g, at) of the group, element by element.
-#[inline]
-fn scatter_group<T: Real>(target: &mut [T], group: &[(&[T], &[T], Strided)], n: usize) {
-    let Some(&(idx0, _, at0)) = group.first() else { return };
-    // Channels of one texel: one index conversion per element, and for the
-    // usual channel counts a loop the compiler unrolls over the group.
-    if group
-        .iter()
-        .all(|&(idx, _, at)| std::ptr::eq(idx, idx0) && at.stride == at0.stride)
-    {
-        match group.len() {
-            1 => return scatter_channels::<T, 1>(target, idx0, at0.stride, group, n),
-            2 => return scatter_channels::<T, 2>(target, idx0, at0.stride, group, n),
-            3 => return scatter_channels::<T, 3>(target, idx0, at0.stride, group, n),
-            4 => return scatter_channels::<T, 4>(target, idx0, at0.stride, group, n),
-            _ => {}
-        }
-    }
-    for i in 0..n {
-        for &(idx, g, at) in group {
-            // SAFETY: as above.
-            unsafe { *target.get_unchecked_mut(at.index(*idx.get_unchecked(i))) += *g.get_unchecked(i) };
-        }
-    }
-}
-
-/// [`scatter_group`] for `C` channels read at the same texel indices.
-#[inline(always)]
-fn scatter_channels<T: Real, const C: usize>(
-    target: &mut [T],
-    idx: &[T],
-    stride: usize,
-    group: &[(&[T], &[T], Strided)],
-    n: usize,
-) {
-    let g: [&[T]; C] = std::array::from_fn(|c| group[c].1);
-    let offset: [usize; C] = std::array::from_fn(|c| group[c].2.offset);
-    for i in 0..n {
-        // SAFETY: every slice holds the tile's n elements; the indices were
-        // checked against the target's length for every offset.
-        unsafe {
-            let base = idx.get_unchecked(i).to_index_unchecked() * stride;
-            for c in 0..C {
-                *target.get_unchecked_mut(base + offset[c]) += *g[c].get_unchecked(i);
-            }
-        }
-    }
-}
-
-/// The element a gather index addresses: `index * stride + offset` (e.g. a
-/// channel of texel-major RGB data), and how many indices are valid.
-#[derive(Clone, Copy)]
-struct Strided {
-    stride: usize,
-    offset: usize,
-    count: usize,
-}
-
-impl Strided {
-    const UNIT: Strided = Strided {
-        stride: 1,
-        offset: 0,
-        count: 0,
-    };
-
-    fn new(stride: u32, offset: u32, len: usize) -> Self {
-        let (stride, offset) = (stride as usize, offset as usize);
-        let count = if len > offset {
-            (len - 1 - offset) / stride + 1
-        } else {
-            0
-        };
-        Strided { stride, offset, count }
-    }
-
-    /// The element of index `i`, which the caller checked against `count`.
-    #[inline(always)]
-    fn index<T: Real>(self, i: T) -> usize {
-        // SAFETY: the caller checked 0 <= i < count <= 2^24.
-        let i = unsafe { i.to_index_unchecked() };
-        i * self.stride + self.offset
-    }
-}
-
 /// One tile of a chunk's run.
 struct Tile<'p, T> {
     t0: usize,
@@ -1459,49 +1316,6 @@ struct Tile<'p, T> {
     adjs: Ptr<T>,
     privates: &'p [Ptr<T>],
     chunk: usize,
-}
-
-/// Checks that every index of a tile (floats holding integers) addresses an
-/// array of `len` elements, in one vectorised pass, so that the gather or
-/// scatter loop after it indexes unchecked.
-#[inline]
-fn check_indices<T: Real>(idx: &[T], len: usize, op: &str) {
-    let hi = T::c(len as f64);
-    let ok = idx.iter().fold(true, |ok, &i| ok & (i >= T::zero()) & (i < hi));
-    if !ok {
-        let bad = idx
-            .iter()
-            .find(|&&i| !(i >= T::zero() && i < hi))
-            .copied()
-            .unwrap_or(T::nan());
-        panic!("{op}: index {bad} out of range for an array of {len} elements");
-    }
-}
-
-/// Sum with 16 independent accumulators (vectorises; exact order is fixed).
-#[inline]
-pub(crate) fn sum<T: Real>(x: &[T]) -> T {
-    let mut acc = [T::zero(); 16];
-    let chunks = x.chunks_exact(16);
-    let rest = chunks.remainder();
-    for c in chunks {
-        for (a, &v) in acc.iter_mut().zip(c) {
-            *a += v;
-        }
-    }
-    let mut s = rest.iter().fold(T::zero(), |s, &v| s + v);
-    for a in acc {
-        s += a;
-    }
-    s
-}
-
-/// dst += src.
-#[inline]
-pub(crate) fn add_into<T: Real>(dst: &mut [T], src: &[T]) {
-    for (d, &s) in dst.iter_mut().zip(src) {
-        *d += s;
-    }
 }
 
 fn first_non_finite<T: Real>(

@@ -1,5 +1,12 @@
-//! User-defined ops: a forward and a vector-Jacobian product over whole
-//! arrays become a first-class node (see `examples/custom_op.rs`).
+//! User-defined ops: a forward `y = f(x_0, ..., x_k)` and a vector-Jacobian
+//! product over whole arrays become a first-class node (see
+//! `examples/custom_op.rs`).
+//!
+//! VJP, with `gx_j = dL/dx_j` and `gy = dL/dy`: `gx_j += gy * dy/dx_j`, as
+//! the op's own [`CustomOp::vjp`] computes it.
+//!
+//! Structural: the tape cannot see inside the op, so it runs as a plain step
+//! over whole arrays, never within a region's tiles.
 
 use std::sync::Arc;
 
@@ -54,4 +61,36 @@ impl<T: Real> Tape<T> {
         };
         self.record(Op::Custom(index), len, inputs)
     }
+}
+
+/// Forward: the op's output from its inputs' values (at most [`MAX_INPUTS`]).
+pub(crate) fn forward<'a, T: Real>(op: &dyn CustomOp<T>, inputs: impl Iterator<Item = &'a [T]>, output: &mut [T]) {
+    let mut values: [&[T]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+    let mut num = 0;
+    for (slot, x) in values.iter_mut().zip(inputs) {
+        *slot = x;
+        num += 1;
+    }
+    op.forward(&values[..num], output);
+}
+
+/// VJP: the op adds `grad_output` times its Jacobian into the gradients of
+/// its inputs, given in order with their values (None: no gradient flows
+/// there). No two gradients may alias: the caller gives an input listed
+/// twice its gradient once.
+pub(crate) fn backward<'a, T: Real>(
+    op: &dyn CustomOp<T>,
+    inputs: impl Iterator<Item = (&'a [T], Option<&'a mut [T]>)>,
+    output: &[T],
+    grad_output: &[T],
+) {
+    let mut values: [&[T]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+    let mut grads: [Option<&mut [T]>; MAX_INPUTS] = Default::default();
+    let mut num = 0;
+    for ((x, g), (value, grad)) in inputs.zip(values.iter_mut().zip(&mut grads)) {
+        *value = x;
+        *grad = g;
+        num += 1;
+    }
+    op.vjp(&values[..num], output, grad_output, &mut grads[..num]);
 }

@@ -3,14 +3,14 @@
 //! Elementwise ops broadcast length-1 arrays; any other length mismatch
 //! panics with the op's name and both shapes.
 
-mod concat;
+pub(crate) mod concat;
 pub mod custom;
-mod gather;
-mod index;
+pub(crate) mod gather;
+pub(crate) mod index;
 pub(crate) mod map;
-mod scatter_add;
-mod slice;
-mod sum;
+pub(crate) mod scatter_add;
+pub(crate) mod slice;
+pub(crate) mod sum;
 
 #[cfg(test)]
 mod tests;
@@ -252,3 +252,12 @@ macro_rules! scalar_on_left {
 }
 
 scalar_on_left!(f32, f64);
+
+/// dst += src, elementwise (adjoints of slice and concat, and the reduction
+/// of the chunks' private accumulators).
+#[inline]
+pub(crate) fn add_into<T: Real>(dst: &mut [T], src: &[T]) {
+    for (d, &s) in dst.iter_mut().zip(src) {
+        *d += s;
+    }
+}
