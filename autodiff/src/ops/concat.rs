@@ -45,3 +45,27 @@ pub(crate) fn backward<'a, T: Real>(gy: &[T], parts: impl Iterator<Item = (usize
         at += len;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::Tape;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+
+    #[test]
+    fn concat_lays_parts_end_to_end() {
+        let tape = Tape::<f64>::new();
+        let x = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(
+            &*tape.value(tape.concat(&[x.slice(2, 2), x.slice(0, 1)])),
+            &[3.0, 4.0, 1.0]
+        );
+        // A part listed twice gets the adjoints of both its ranges.
+        let r = gradcheck(&[Input::Var(uniform(6, -1.0, 1.0, 12))], |t, x| {
+            let a = x[0].slice(1, 3).exp();
+            let b = x[0].slice(0, 2) * 3.0;
+            t.concat(&[a, b, a]).sin()
+        });
+        assert!(r.worst_rel_error < TOL, "concat: {r}");
+    }
+}

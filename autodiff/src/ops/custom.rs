@@ -94,3 +94,63 @@ pub(crate) fn backward<'a, T: Real>(
     }
     op.vjp(&values[..num], output, grad_output, &mut grads[..num]);
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::CustomOp;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+    use crate::{Real, Tape};
+
+    /// `y[i] = s x[i] x[i + 1]` for inputs `(x, s)`, `s` of length 1.
+    struct NeighbourProduct;
+
+    impl<T: Real> CustomOp<T> for NeighbourProduct {
+        fn name(&self) -> &str {
+            "neighbour_product"
+        }
+
+        fn output_len(&self, input_lens: &[usize]) -> usize {
+            input_lens[0] - 1
+        }
+
+        fn forward(&self, inputs: &[&[T]], output: &mut [T]) {
+            let (x, s) = (inputs[0], inputs[1][0]);
+            for (i, y) in output.iter_mut().enumerate() {
+                *y = s * x[i] * x[i + 1];
+            }
+        }
+
+        fn vjp(&self, inputs: &[&[T]], _output: &[T], grad_output: &[T], grad_inputs: &mut [Option<&mut [T]>]) {
+            let (x, s) = (inputs[0], inputs[1][0]);
+            if let Some(gx) = grad_inputs[0].as_deref_mut() {
+                for (i, &gy) in grad_output.iter().enumerate() {
+                    gx[i] += gy * s * x[i + 1];
+                    gx[i + 1] += gy * s * x[i];
+                }
+            }
+            if let Some(gs) = grad_inputs[1].as_deref_mut() {
+                for (i, &gy) in grad_output.iter().enumerate() {
+                    gs[0] += gy * x[i] * x[i + 1];
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn custom_op_runs_its_forward_and_vjp() {
+        let tape = Tape::<f64>::new();
+        let op: Arc<dyn CustomOp<f64>> = Arc::new(NeighbourProduct);
+        let y = tape.custom(op, &[tape.constant(&[1.0, 2.0, 3.0]), tape.scalar(2.0)]);
+        assert_eq!(&*tape.value(y), &[4.0, 12.0]);
+        for scale in [Input::Var(vec![0.7]), Input::Const(vec![0.7])] {
+            let r = gradcheck(&[Input::Var(uniform(9, -1.0, 1.0, 14)), scale], |t, x| {
+                let op: Arc<dyn CustomOp<f64>> = Arc::new(NeighbourProduct);
+                t.custom(op, &[x[0].exp(), x[1]]).sin()
+            });
+            assert!(r.worst_rel_error < TOL, "custom: {r}");
+        }
+    }
+}

@@ -60,3 +60,33 @@ pub(crate) fn backward_tile<T: Real>(gy: &[T], idx: &[T], gx: &mut [T], accumula
         *g = acc.mul_add(*g, unsafe { *gy.get_unchecked(i.to_index_unchecked()) });
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::Tape;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+
+    #[test]
+    fn scatter_add_and_segmented_sum() {
+        let tape = Tape::<f64>::new();
+        let idx = tape.constant(&[2.0, 0.0, 2.0, 1.0]);
+        let vals = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(&*tape.value(vals.scatter_add(idx, 4)), &[2.0, 4.0, 4.0, 0.0]);
+        let seg = tape.constant(&[0.0, 0.0, 1.0, 1.0]);
+        assert_eq!(&*tape.value(vals.segmented_sum(seg, 2)), &[3.0, 7.0]);
+        let idx = Input::Const(vec![2.0, 0.0, 2.0, 1.0, 4.0, 4.0, 3.0]);
+        let r = gradcheck(&[Input::Var(uniform(7, -1.0, 1.0, 11)), idx], |_, x| {
+            x[0].scatter_add(x[1], 6).sin()
+        });
+        assert!(r.worst_rel_error < TOL, "scatter_add: {r}");
+    }
+
+    #[test]
+    #[should_panic(expected = "scatter_add: index 2 out of range for an array of 2 elements")]
+    fn scatter_add_out_of_range_names_the_op() {
+        let tape = Tape::<f32>::new();
+        let vals = tape.constant(&[1.0, 2.0]);
+        let _ = tape.value(vals.scatter_add(tape.constant(&[0.0, 2.0]), 2));
+    }
+}

@@ -32,3 +32,22 @@ pub(crate) fn forward<T: Real>(x: &[T], start: usize, y: &mut [T]) {
 pub(crate) fn backward<T: Real>(gy: &[T], start: usize, gx: &mut [T]) {
     add_into(&mut gx[start..start + gy.len()], gy);
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::Tape;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+
+    #[test]
+    fn slice_takes_a_contiguous_part() {
+        let tape = Tape::<f64>::new();
+        let x = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(&*tape.value(x.slice(1, 2)), &[2.0, 3.0]);
+        // Overlapping slices: their adjoints add up in the shared elements.
+        let r = gradcheck(&[Input::Var(uniform(6, -1.0, 1.0, 12))], |_, x| {
+            x[0].slice(1, 3).exp() * x[0].slice(3, 3)
+        });
+        assert!(r.worst_rel_error < TOL, "slice: {r}");
+    }
+}

@@ -66,3 +66,20 @@ pub(crate) fn backward_tile<T: Real>(gy: T, gx: &mut [T], accumulate: bool) {
         gx.fill(gy);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::Tape;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+
+    #[test]
+    fn sum_and_mean() {
+        let tape = Tape::<f64>::new();
+        let x = tape.constant(&[1.0, 2.0, 3.5]);
+        assert_eq!(tape.value(x.sum())[0], 6.5);
+        assert_eq!(tape.value(x.mean())[0], 6.5 / 3.0);
+        let r = gradcheck(&[Input::Var(uniform(10, -1.0, 1.0, 9))], |_, x| (x[0] * x[0]).mean());
+        assert!(r.worst_rel_error < TOL, "mean: {r}");
+    }
+}
