@@ -305,6 +305,126 @@ impl<T: Real> Executor<T> {
             .sum::<usize>()
             + self.partials.capacity() * 8
     }
+
+    /// Sizes each chunk's tile slots and broadcast-gradient sums for the
+    /// region's run, and its private accumulators: chunk 0 accumulates
+    /// straight into the real buffers, the others into private zeroed copies.
+    fn prepare_chunks(&mut self, reg: &Region, pass: Pass, cut: &Cut) {
+        let per_chunk = (reg.slots + reg.bcasts.len()) * cut.tile_len;
+        if self.chunks.len() < cut.threads {
+            self.chunks.resize_with(cut.threads, Chunk::default);
+        }
+        for (c, chunk) in self.chunks[..cut.threads].iter_mut().enumerate() {
+            chunk.vals.resize(per_chunk, T::zero());
+            if pass.backward() {
+                chunk.adjs.resize(per_chunk, T::zero());
+                chunk.bcast_grads.clear();
+                chunk.bcast_grads.resize(reg.bcasts.len(), T::zero());
+            }
+            chunk.non_finite = None;
+            if chunk.privates.len() < reg.shared.len() {
+                chunk.privates.resize_with(reg.shared.len(), Vec::new);
+            }
+            for (s, p) in chunk.privates[..reg.shared.len()].iter_mut().enumerate() {
+                let (target, scatter) = self.shared[reg.shared.start + s];
+                let needed = if scatter {
+                    pass.forward_sinks()
+                } else {
+                    pass.backward() && self.live[self.arrays[reg.arrays.start + target as usize] as usize]
+                };
+                let len = if c == 0 || !needed {
+                    0
+                } else {
+                    self.vals[target as usize].len
+                };
+                p.clear();
+                p.resize(len, T::zero());
+            }
+        }
+    }
+
+    /// Zeroes what the chunks accumulate into before they start (scatter
+    /// outputs, sums' tile partials, and in a backward pass the fresh
+    /// gradient buffers it does not write), and marks which backward
+    /// contributions overwrite instead of adding.
+    fn prepare_outputs(&mut self, reg: &Region, pass: Pass, tiles: usize, nodes: &[Node<T>], edges: &[u32]) {
+        if pass.forward_sinks() {
+            // Scatter outputs start at zero (chunk 0 writes into them).
+            for ins in &self.instrs[reg.instrs.clone()] {
+                if let Out::Scatter(_, a) = ins.out {
+                    // SAFETY: no chunk runs yet.
+                    unsafe { self.vals[a as usize].slice(0, self.vals[a as usize].len) }.fill(T::zero());
+                }
+            }
+        }
+        self.partials.clear();
+        self.partials.resize(tiles * reg.sums, 0.0);
+        if pass.backward() {
+            self.overwrite_flags(nodes, edges, reg);
+            // A fresh gradient buffer that this pass does not write is zero.
+            for (a, &i) in self.arrays[reg.arrays.clone()].iter().enumerate() {
+                if nodes[i as usize].fresh && !self.touched[reg.slots + reg.bcasts.len() + a] {
+                    // SAFETY: no chunk runs yet.
+                    unsafe { self.adjs[a].slice(0, self.adjs[a].len) }.fill(T::zero());
+                }
+            }
+        }
+    }
+
+    /// Adds the private accumulators of chunks 1.. into the real buffers,
+    /// in chunk order.
+    fn reduce_chunks(&mut self, reg: &Region, pass: Pass, threads: usize) {
+        for (s, &(target, scatter)) in self.shared[reg.shared.clone()].iter().enumerate() {
+            let dst = if pass.backward() {
+                self.adjs[target as usize]
+            } else {
+                self.vals[target as usize]
+            };
+            let wanted = if scatter { pass.forward_sinks() } else { pass.backward() };
+            if dst.ptr.is_null() || !wanted {
+                continue;
+            }
+            // SAFETY: the chunks are done; `dst` is the only reference.
+            let dst = unsafe { dst.slice(0, dst.len) };
+            for chunk in &self.chunks[1..threads] {
+                if !chunk.privates[s].is_empty() {
+                    add_into(dst, &chunk.privates[s]);
+                }
+            }
+        }
+    }
+
+    /// Writes each sum of the region from its tiles' partials.
+    fn finish_sums(&mut self, reg: &Region, tiles: usize) {
+        let mut k = 0;
+        for ins in &self.instrs[reg.instrs.clone()] {
+            if let Out::Sum(p, a) = ins.out {
+                // SAFETY: the chunks are done.
+                let v = unsafe { self.vals[a as usize].slice(0, 1) };
+                v[0] = sum::finish((0..tiles).map(|t| self.partials[t * reg.sums + p as usize]));
+                k += 1;
+            }
+        }
+        debug_assert_eq!(k, reg.sums);
+    }
+
+    /// The first non-finite value of the region's run (lowest node, then
+    /// lowest element), the sums' values included.
+    fn found_non_finite(&self, reg: &Region, pass: Pass, threads: usize) -> Option<NonFinite> {
+        let found = self.chunks[..threads]
+            .iter()
+            .filter_map(|c| c.non_finite.clone())
+            .min_by_key(|nf| (nf.node, nf.index));
+        if found.is_some() || !pass.forward_sinks() {
+            return found;
+        }
+        self.instrs[reg.instrs.clone()].iter().find_map(|ins| {
+            let Out::Sum(_, a) = ins.out else { return None };
+            // SAFETY: the chunks are done.
+            let v = unsafe { self.vals[a as usize].slice(0, 1) };
+            first_non_finite(v, ins.node, "sum", 0, false)
+        })
+    }
 }
 
 /// The length of the domain a tileable node iterates over, or None for plain ops.
@@ -488,27 +608,7 @@ impl<T: Real> Graph<T> {
             let mut ins = [Src::Slot(0); 3];
             let num = n.num_inputs as usize;
             for (k, src) in ins.iter_mut().enumerate().take(num) {
-                let i = self.edges[n.first_input as usize + k];
-                let inp = self.nodes[i as usize];
-                *src = if inp.step == step && !is_input(&inp.op) && inp.value == NONE {
-                    Src::Slot(inp.slot)
-                } else if inp.len as usize == reg.len || (matches!(n.op, Op::Gather { .. }) && k == 0) {
-                    Src::Array(self.array_of(i, a0))
-                } else {
-                    debug_assert_eq!(inp.len, 1);
-                    if self.exec.local.len() < self.nodes.len() {
-                        self.exec.local.resize(self.nodes.len(), NONE);
-                    }
-                    // Broadcasts share the local table; mark them apart by range.
-                    let pos = self.exec.bcasts[b0..].iter().position(|&b| b == i);
-                    Src::Bcast(match pos {
-                        Some(p) => p as u32,
-                        None => {
-                            self.exec.bcasts.push(i);
-                            (self.exec.bcasts.len() - b0 - 1) as u32
-                        }
-                    })
-                };
+                *src = self.input_src(&n, k, reg.len, a0, b0);
             }
             // Unused input positions read the first input (never written).
             for k in num..3 {
@@ -572,6 +672,34 @@ impl<T: Real> Graph<T> {
         reg.group_members = g0..self.exec.group_members.len();
         reg.slots = slots as usize;
         reg.sums = sums as usize;
+    }
+
+    /// Where a member `n` of the region being built (domain `len`, array and
+    /// broadcast tables from `a0` and `b0`) reads its input `k`: a tile slot
+    /// of a value computed in the region, a full-length buffer, or a
+    /// broadcast scalar.
+    fn input_src(&mut self, n: &Node<T>, k: usize, len: usize, a0: usize, b0: usize) -> Src {
+        let i = self.edges[n.first_input as usize + k];
+        let inp = self.nodes[i as usize];
+        if inp.step == n.step && !is_input(&inp.op) && inp.value == NONE {
+            Src::Slot(inp.slot)
+        } else if inp.len as usize == len || (matches!(n.op, Op::Gather { .. }) && k == 0) {
+            Src::Array(self.array_of(i, a0))
+        } else {
+            debug_assert_eq!(inp.len, 1);
+            if self.exec.local.len() < self.nodes.len() {
+                self.exec.local.resize(self.nodes.len(), NONE);
+            }
+            // Broadcasts share the local table; mark them apart by range.
+            let pos = self.exec.bcasts[b0..].iter().position(|&b| b == i);
+            Src::Bcast(match pos {
+                Some(p) => p as u32,
+                None => {
+                    self.exec.bcasts.push(i);
+                    (self.exec.bcasts.len() - b0 - 1) as u32
+                }
+            })
+        }
     }
 
     /// Groups the gathers of the region whose instructions begin at `i0`
@@ -784,33 +912,61 @@ impl<T: Real> Graph<T> {
     /// Runs region `r` forward (optionally without its sinks) or backward.
     fn run_region(&mut self, r: usize, pass: Pass) {
         let reg = self.exec.regions[r].clone();
-        let backward = pass.backward();
-        // Gradient buffers exist before the chunks start: kept values and
-        // external arrays that need a gradient, and the broadcast scalars.
-        if backward {
-            for a in reg.arrays.clone() {
-                let i = self.exec.arrays[a];
-                let gathered = self.exec.shared[reg.shared.clone()].contains(&((a - reg.arrays.start) as u32, false));
-                if !self.exec.live[i as usize] || self.nodes[i as usize].adjoint != NONE {
-                    continue;
-                }
-                if gathered {
-                    self.adjoint_of(i);
-                } else {
-                    // Nothing was added yet: the region's first contribution
-                    // per element writes instead of adding (no zeroing pass).
-                    let len = self.nodes[i as usize].len as usize;
-                    self.nodes[i as usize].adjoint = self.adjoints.take(len);
-                    self.nodes[i as usize].fresh = true;
-                }
+        if pass.backward() {
+            self.prepare_gradients(&reg);
+        }
+        self.bind_buffers(&reg);
+        let cut = Cut::new::<T>(&reg);
+        self.exec.prepare_chunks(&reg, pass, &cut);
+        self.exec
+            .prepare_outputs(&reg, pass, cut.tiles, &self.nodes, &self.edges);
+        self.run_chunks(&reg, pass, &cut);
+        self.exec.reduce_chunks(&reg, pass, cut.threads);
+        if pass.backward() {
+            self.add_broadcast_gradients(&reg, cut.threads);
+        }
+        for &i in &self.exec.arrays[reg.arrays.clone()] {
+            self.nodes[i as usize].fresh = false;
+        }
+        if pass.forward_sinks() {
+            self.exec.finish_sums(&reg, cut.tiles);
+        }
+        if self.check_finite && self.non_finite.is_none() {
+            self.non_finite = self.exec.found_non_finite(&reg, pass, cut.threads);
+        }
+    }
+
+    /// Gives the region's arrays that need a gradient (kept values and
+    /// external arrays) and its broadcast scalars their gradient buffers
+    /// before the chunks start.
+    fn prepare_gradients(&mut self, reg: &Region) {
+        for a in reg.arrays.clone() {
+            let i = self.exec.arrays[a];
+            let gathered = self.exec.shared[reg.shared.clone()].contains(&((a - reg.arrays.start) as u32, false));
+            if !self.exec.live[i as usize] || self.nodes[i as usize].adjoint != NONE {
+                continue;
             }
-            for b in reg.bcasts.clone() {
-                let i = self.exec.bcasts[b];
-                if self.exec.live[i as usize] {
-                    self.adjoint_of(i);
-                }
+            if gathered {
+                self.adjoint_of(i);
+            } else {
+                // Nothing was added yet: the region's first contribution
+                // per element writes instead of adding (no zeroing pass).
+                let len = self.nodes[i as usize].len as usize;
+                self.nodes[i as usize].adjoint = self.adjoints.take(len);
+                self.nodes[i as usize].fresh = true;
             }
         }
+        for b in reg.bcasts.clone() {
+            let i = self.exec.bcasts[b];
+            if self.exec.live[i as usize] {
+                self.adjoint_of(i);
+            }
+        }
+    }
+
+    /// Points the executor's array table at the region's value and gradient
+    /// buffers, and reads its broadcast scalars.
+    fn bind_buffers(&mut self, reg: &Region) {
         let ex = &mut self.exec;
         ex.vals.clear();
         ex.adjs.clear();
@@ -829,71 +985,12 @@ impl<T: Real> Graph<T> {
             let n = &self.nodes[ex.bcasts[b] as usize];
             ex.bcast_values.push(self.values.bufs[n.value as usize][0]);
         }
-        let tile = tile_for::<T>(reg.slots + reg.bcasts.len());
-        let tiles = reg.len.div_ceil(tile);
-        // The split depends on the length only, never on the thread count, so
-        // that accumulations (scatter outputs, gradients of gathered arrays and
-        // broadcast scalars) add up in the same order on any machine.
-        let threads = if reg.len >= PARALLEL_MIN_LEN {
-            CHUNKS.min(tiles)
-        } else {
-            1
-        };
-        let tile_len = reg.len.min(tile);
-        let per_chunk = (reg.slots + reg.bcasts.len()) * tile_len;
-        if ex.chunks.len() < threads {
-            ex.chunks.resize_with(threads, Chunk::default);
-        }
-        for (c, chunk) in ex.chunks[..threads].iter_mut().enumerate() {
-            chunk.vals.resize(per_chunk, T::zero());
-            if backward {
-                chunk.adjs.resize(per_chunk, T::zero());
-                chunk.bcast_grads.clear();
-                chunk.bcast_grads.resize(reg.bcasts.len(), T::zero());
-            }
-            chunk.non_finite = None;
-            // Chunk 0 accumulates straight into the real buffers; the others
-            // into private zeroed copies.
-            if chunk.privates.len() < reg.shared.len() {
-                chunk.privates.resize_with(reg.shared.len(), Vec::new);
-            }
-            for (s, p) in chunk.privates[..reg.shared.len()].iter_mut().enumerate() {
-                let (target, scatter) = ex.shared[reg.shared.start + s];
-                let needed = if scatter {
-                    pass.forward_sinks()
-                } else {
-                    backward && ex.live[ex.arrays[reg.arrays.start + target as usize] as usize]
-                };
-                let len = if c == 0 || !needed {
-                    0
-                } else {
-                    ex.vals[target as usize].len
-                };
-                p.clear();
-                p.resize(len, T::zero());
-            }
-        }
-        if pass.forward_sinks() {
-            // Scatter outputs start at zero (chunk 0 writes into them).
-            for ins in &ex.instrs[reg.instrs.clone()] {
-                if let Out::Scatter(_, a) = ins.out {
-                    // SAFETY: no chunk runs yet.
-                    unsafe { ex.vals[a as usize].slice(0, ex.vals[a as usize].len) }.fill(T::zero());
-                }
-            }
-        }
-        ex.partials.clear();
-        ex.partials.resize(tiles * reg.sums, 0.0);
-        if backward {
-            ex.overwrite_flags(&self.nodes, &self.edges, &reg);
-            // A fresh gradient buffer that this pass does not write is zero.
-            for (a, &i) in ex.arrays[reg.arrays.clone()].iter().enumerate() {
-                if self.nodes[i as usize].fresh && !ex.touched[reg.slots + reg.bcasts.len() + a] {
-                    // SAFETY: no chunk runs yet.
-                    unsafe { ex.adjs[a].slice(0, ex.adjs[a].len) }.fill(T::zero());
-                }
-            }
-        }
+    }
+
+    /// Runs the region's chunks of tiles: on rayon's threads, or one after
+    /// the other when there is one chunk or one thread.
+    fn run_chunks(&mut self, reg: &Region, pass: Pass, cut: &Cut) {
+        let ex = &mut self.exec;
         let ctx = Ctx {
             nodes: &self.nodes,
             edges: &self.edges,
@@ -908,85 +1005,36 @@ impl<T: Real> Graph<T> {
             bcast_nodes: &ex.bcasts[reg.bcasts.clone()],
             partials: Ptr::of(&mut ex.partials),
             len: reg.len,
-            tile_len,
+            tile_len: cut.tile_len,
             slots: reg.slots,
             sums: reg.sums,
             check_finite: self.check_finite,
             pass,
         };
-        if threads == 1 {
-            ctx.run_chunk(&mut ex.chunks[0], 0, 0..tiles);
-        } else if rayon::current_num_threads() == 1 {
-            for (c, chunk) in ex.chunks[..threads].iter_mut().enumerate() {
-                ctx.run_chunk(chunk, c, tiles * c / threads..tiles * (c + 1) / threads);
+        let chunks = &mut ex.chunks[..cut.threads];
+        if cut.threads == 1 || rayon::current_num_threads() == 1 {
+            for (c, chunk) in chunks.iter_mut().enumerate() {
+                ctx.run_chunk(chunk, c, cut.chunk(c));
             }
         } else {
-            ex.chunks[..threads].par_iter_mut().enumerate().for_each(|(c, chunk)| {
-                ctx.run_chunk(chunk, c, tiles * c / threads..tiles * (c + 1) / threads);
+            chunks.par_iter_mut().enumerate().for_each(|(c, chunk)| {
+                ctx.run_chunk(chunk, c, cut.chunk(c));
             });
         }
-        // Reductions across chunks, in chunk order.
-        for (s, &(target, scatter)) in ex.shared[reg.shared.clone()].iter().enumerate() {
-            let dst = if backward {
-                ex.adjs[target as usize]
-            } else {
-                ex.vals[target as usize]
-            };
-            let wanted = if scatter { pass.forward_sinks() } else { backward };
-            if dst.ptr.is_null() || !wanted {
-                continue;
-            }
-            // SAFETY: the chunks are done; `dst` is the only reference.
-            let dst = unsafe { dst.slice(0, dst.len) };
-            for chunk in &ex.chunks[1..threads] {
-                if !chunk.privates[s].is_empty() {
-                    add_into(dst, &chunk.privates[s]);
-                }
-            }
-        }
-        if backward {
-            for (b, k) in reg.bcasts.clone().enumerate() {
-                let i = ex.bcasts[k] as usize;
-                if ex.live[i] {
-                    let total = ex.chunks[..threads]
-                        .iter()
-                        .fold(T::zero(), |acc, c| acc + c.bcast_grads[b]);
-                    let a = self.nodes[i].adjoint as usize;
-                    self.adjoints.bufs[a][0] += total;
-                }
-            }
-        }
-        for &i in &ex.arrays[reg.arrays.clone()] {
-            self.nodes[i as usize].fresh = false;
-        }
-        if pass.forward_sinks() {
-            let mut k = 0;
-            for ins in &ex.instrs[reg.instrs.clone()] {
-                if let Out::Sum(p, a) = ins.out {
-                    // SAFETY: the chunks are done.
-                    let v = unsafe { ex.vals[a as usize].slice(0, 1) };
-                    v[0] = sum::finish((0..tiles).map(|t| ex.partials[t * reg.sums + p as usize]));
-                    k += 1;
-                }
-            }
-            debug_assert_eq!(k, reg.sums);
-        }
-        if self.check_finite && self.non_finite.is_none() {
-            self.non_finite = ex.chunks[..threads]
-                .iter()
-                .filter_map(|c| c.non_finite.clone())
-                .min_by_key(|nf| (nf.node, nf.index));
-            if self.non_finite.is_none() && pass.forward_sinks() {
-                for ins in &ex.instrs[reg.instrs.clone()] {
-                    if let Out::Sum(_, a) = ins.out {
-                        // SAFETY: the chunks are done.
-                        let v = unsafe { ex.vals[a as usize].slice(0, 1) };
-                        if let Some(nf) = first_non_finite(v, ins.node, "sum", 0, false) {
-                            self.non_finite = Some(nf);
-                            break;
-                        }
-                    }
-                }
+    }
+
+    /// Adds each chunk's sum of the broadcast scalars' tile gradients, in
+    /// chunk order, into the scalars' gradients.
+    fn add_broadcast_gradients(&mut self, reg: &Region, threads: usize) {
+        let ex = &self.exec;
+        for (b, k) in reg.bcasts.clone().enumerate() {
+            let i = ex.bcasts[k] as usize;
+            if ex.live[i] {
+                let total = ex.chunks[..threads]
+                    .iter()
+                    .fold(T::zero(), |acc, c| acc + c.bcast_grads[b]);
+                let a = self.nodes[i].adjoint as usize;
+                self.adjoints.bufs[a][0] += total;
             }
         }
     }
@@ -1009,6 +1057,39 @@ impl Pass {
     }
     fn backward(self) -> bool {
         matches!(self, Pass::Backward | Pass::Fused)
+    }
+}
+
+/// How a region's run is cut: tiles of `tile_len` elements, in `threads`
+/// contiguous chunks of tiles.
+struct Cut {
+    tile_len: usize,
+    tiles: usize,
+    threads: usize,
+}
+
+impl Cut {
+    fn new<T>(reg: &Region) -> Cut {
+        let tile = tile_for::<T>(reg.slots + reg.bcasts.len());
+        let tiles = reg.len.div_ceil(tile);
+        // The split depends on the length only, never on the thread count, so
+        // that accumulations (scatter outputs, gradients of gathered arrays and
+        // broadcast scalars) add up in the same order on any machine.
+        let threads = if reg.len >= PARALLEL_MIN_LEN {
+            CHUNKS.min(tiles)
+        } else {
+            1
+        };
+        Cut {
+            tile_len: reg.len.min(tile),
+            tiles,
+            threads,
+        }
+    }
+
+    /// The tiles of chunk `c`.
+    fn chunk(&self, c: usize) -> Range<usize> {
+        self.tiles * c / self.threads..self.tiles * (c + 1) / self.threads
     }
 }
 
