@@ -94,7 +94,7 @@ pub(crate) fn backward_tile<'a, T: Real>(
     scatter_group(gx, &group[..count], n);
 }
 
-/// target[at(idx[i])] += g[i] for every (idx, g, at) of the group, element by element.
+/// `target[at(idx[i])] += g[i]` for every `(idx, g, at)` of the group, element by element.
 #[inline]
 fn scatter_group<T: Real>(target: &mut [T], group: &[(&[T], &[T], Strided)], n: usize) {
     let Some(&(idx0, _, at0)) = group.first() else { return };
