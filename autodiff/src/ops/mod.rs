@@ -1,7 +1,15 @@
 //! The ops a program records on a tape, as methods and operators of [`Var`].
 //!
 //! Elementwise ops broadcast length-1 arrays; any other length mismatch
-//! panics with the op's name and both shapes.
+//! panics with the op's name and both shapes. Their constructors are here,
+//! each one's forward `f` and derivatives `df` in `map`, their tests in
+//! `tests`.
+//!
+//! A structural op (its output is not an elementwise function of its
+//! inputs) is one file holding its constructor, its forward and backward
+//! kernels and its tests: `sum`, `gather`, `scatter_add`, `slice`, `concat`,
+//! `custom`. The executor (`exec`) only decides where and in which order
+//! the kernels run.
 
 pub(crate) mod concat;
 pub mod custom;
