@@ -55,16 +55,17 @@ pub(crate) const GROUP: usize = 16;
 pub(crate) fn forward_tile<'a, T: Real>(
     source: &[T],
     idx: &[T],
-    members: impl Iterator<Item = (u32, u32, &'a mut [T])>,
+    members: impl ExactSizeIterator<Item = (u32, u32, &'a mut [T])>,
 ) {
     let mut group: [(usize, usize, &mut [T]); GROUP] = std::array::from_fn(|_| (1, 0, &mut [][..]));
-    let mut count = 0;
+    // Taken before the loop, not counted in it: with the count known up
+    // front the compiler keeps the gather loop below free of extra work.
+    let count = members.len();
     for ((stride, offset, y), member) in members.zip(&mut group) {
         let at = Strided::new(stride, offset, source.len());
         check_indices(idx, at.count, "gather");
         debug_assert_eq!(y.len(), idx.len());
         *member = (at.stride, at.offset, y);
-        count += 1;
     }
     // SAFETY: indices checked above; every output holds the tile's elements.
     unsafe { T::gather_unchecked(source, idx, &mut group[..count]) };
