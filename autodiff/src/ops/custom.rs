@@ -1,5 +1,12 @@
-//! User-defined ops: a forward and a vector-Jacobian product over whole
-//! arrays become a first-class node (see `examples/custom_op.rs`).
+//! User-defined ops: a forward `y = f(x_0, ..., x_k)` and a vector-Jacobian
+//! product over whole arrays become a first-class node (see
+//! `examples/custom_op.rs`).
+//!
+//! VJP, with `gx_j = dL/dx_j` and `gy = dL/dy`: `gx_j += gy * dy/dx_j`, as
+//! the op's own [`CustomOp::vjp`] computes it.
+//!
+//! Structural: the tape cannot see inside the op, so it runs as a plain step
+//! over whole arrays, never within a region's tiles.
 
 use std::sync::Arc;
 
@@ -53,5 +60,97 @@ impl<T: Real> Tape<T> {
             g.customs.len() as u32 - 1
         };
         self.record(Op::Custom(index), len, inputs)
+    }
+}
+
+/// Forward: the op's output from its inputs' values (at most [`MAX_INPUTS`]).
+pub(crate) fn forward<'a, T: Real>(op: &dyn CustomOp<T>, inputs: impl Iterator<Item = &'a [T]>, output: &mut [T]) {
+    let mut values: [&[T]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+    let mut num = 0;
+    for (slot, x) in values.iter_mut().zip(inputs) {
+        *slot = x;
+        num += 1;
+    }
+    op.forward(&values[..num], output);
+}
+
+/// VJP: the op adds `grad_output` times its Jacobian into the gradients of
+/// its inputs, given in order with their values (None: no gradient flows
+/// there). No two gradients may alias: the caller gives an input listed
+/// twice its gradient once.
+pub(crate) fn backward<'a, T: Real>(
+    op: &dyn CustomOp<T>,
+    inputs: impl Iterator<Item = (&'a [T], Option<&'a mut [T]>)>,
+    output: &[T],
+    grad_output: &[T],
+) {
+    let mut values: [&[T]; MAX_INPUTS] = [&[]; MAX_INPUTS];
+    let mut grads: [Option<&mut [T]>; MAX_INPUTS] = Default::default();
+    let mut num = 0;
+    for ((x, g), (value, grad)) in inputs.zip(values.iter_mut().zip(&mut grads)) {
+        *value = x;
+        *grad = g;
+        num += 1;
+    }
+    op.vjp(&values[..num], output, grad_output, &mut grads[..num]);
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::CustomOp;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+    use crate::{Real, Tape};
+
+    /// `y[i] = s x[i] x[i + 1]` for inputs `(x, s)`, `s` of length 1.
+    struct NeighbourProduct;
+
+    impl<T: Real> CustomOp<T> for NeighbourProduct {
+        fn name(&self) -> &str {
+            "neighbour_product"
+        }
+
+        fn output_len(&self, input_lens: &[usize]) -> usize {
+            input_lens[0] - 1
+        }
+
+        fn forward(&self, inputs: &[&[T]], output: &mut [T]) {
+            let (x, s) = (inputs[0], inputs[1][0]);
+            for (i, y) in output.iter_mut().enumerate() {
+                *y = s * x[i] * x[i + 1];
+            }
+        }
+
+        fn vjp(&self, inputs: &[&[T]], _output: &[T], grad_output: &[T], grad_inputs: &mut [Option<&mut [T]>]) {
+            let (x, s) = (inputs[0], inputs[1][0]);
+            if let Some(gx) = grad_inputs[0].as_deref_mut() {
+                for (i, &gy) in grad_output.iter().enumerate() {
+                    gx[i] += gy * s * x[i + 1];
+                    gx[i + 1] += gy * s * x[i];
+                }
+            }
+            if let Some(gs) = grad_inputs[1].as_deref_mut() {
+                for (i, &gy) in grad_output.iter().enumerate() {
+                    gs[0] += gy * x[i] * x[i + 1];
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn custom_op_runs_its_forward_and_vjp() {
+        let tape = Tape::<f64>::new();
+        let op: Arc<dyn CustomOp<f64>> = Arc::new(NeighbourProduct);
+        let y = tape.custom(op, &[tape.constant(&[1.0, 2.0, 3.0]), tape.scalar(2.0)]);
+        assert_eq!(&*tape.value(y), &[4.0, 12.0]);
+        for scale in [Input::Var(vec![0.7]), Input::Const(vec![0.7])] {
+            let r = gradcheck(&[Input::Var(uniform(9, -1.0, 1.0, 14)), scale], |t, x| {
+                let op: Arc<dyn CustomOp<f64>> = Arc::new(NeighbourProduct);
+                t.custom(op, &[x[0].exp(), x[1]]).sin()
+            });
+            assert!(r.worst_rel_error < TOL, "custom: {r}");
+        }
     }
 }

@@ -1,12 +1,24 @@
 //! The ops a program records on a tape, as methods and operators of [`Var`].
 //!
 //! Elementwise ops broadcast length-1 arrays; any other length mismatch
-//! panics with the op's name and both shapes.
+//! panics with the op's name and both shapes. Their constructors are here,
+//! each one's forward `f` and derivatives `df` in `map`, their tests in
+//! `tests`.
+//!
+//! A structural op (its output is not an elementwise function of its
+//! inputs) is one file holding its constructor, its forward and backward
+//! kernels and its tests: `sum`, `gather`, `scatter_add`, `slice`, `concat`,
+//! `custom`. The executor (`exec`) only decides where and in which order
+//! the kernels run.
 
+pub(crate) mod concat;
 pub mod custom;
+pub(crate) mod gather;
+pub(crate) mod index;
 pub(crate) mod map;
-mod reduce;
-mod shape;
+pub(crate) mod scatter_add;
+pub(crate) mod slice;
+pub(crate) mod sum;
 
 #[cfg(test)]
 mod tests;
@@ -175,6 +187,16 @@ impl<'t, T: Real> Var<'t, T> {
     pub fn select(self, a: Self, b: Self) -> Self {
         Self::map(MapKind::Select, [T::zero(); 2], &[self, a, b])
     }
+    /// A length-1 array repeated `len` times. Adjoint: the sum of the output's.
+    pub fn broadcast(self, len: usize) -> Self {
+        assert!(
+            self.len() == 1 || self.len() == len,
+            "broadcast: shape mismatch: cannot broadcast shape [{}] to [{len}]",
+            self.len()
+        );
+        self.tape
+            .record(Op::Map(MapKind::Identity, [T::zero(); 2]), len, &[self])
+    }
     /// The same values with the gradient cut.
     pub fn stop_gradient(self) -> Self {
         self.tape
@@ -238,3 +260,12 @@ macro_rules! scalar_on_left {
 }
 
 scalar_on_left!(f32, f64);
+
+/// dst += src, elementwise (adjoints of slice and concat, and the reduction
+/// of the chunks' private accumulators).
+#[inline]
+pub(crate) fn add_into<T: Real>(dst: &mut [T], src: &[T]) {
+    for (d, &s) in dst.iter_mut().zip(src) {
+        *d += s;
+    }
+}

@@ -1,10 +1,12 @@
-//! Every op: literal forward values (f32 and f64) and a central-difference
-//! gradient check in f64 away from kinks.
+//! The elementwise ops (`map.rs`, constructors in `mod.rs`): literal forward
+//! values (f32 and f64) and a central-difference gradient check in f64 away
+//! from kinks. Each structural op's tests sit in its own file.
 
 use crate::gradcheck::{Input, gradcheck, uniform};
 use crate::{Real, Tape, Var};
 
-const TOL: f64 = 1e-6;
+/// Largest relative error a central-difference check accepts.
+pub(super) const TOL: f64 = 1e-6;
 
 /// Forward values of a one-input program on both float types.
 fn forward_both(x: &[f64], f64_fn: impl for<'t> Fn(Var<'t, f64>) -> Var<'t, f64>) -> Vec<f64> {
@@ -258,62 +260,15 @@ fn mul_add_and_select() {
 }
 
 #[test]
-fn sum_mean_broadcast() {
+fn broadcast_repeats_a_scalar() {
     let tape = Tape::<f64>::new();
-    let x = tape.constant(&[1.0, 2.0, 3.5]);
-    assert_eq!(tape.value(x.sum())[0], 6.5);
-    assert_eq!(tape.value(x.mean())[0], 6.5 / 3.0);
     assert_eq!(&*tape.value(tape.scalar(2.0).broadcast(3)), &[2.0; 3]);
-    let r = gradcheck(&[Input::Var(uniform(10, -1.0, 1.0, 9))], |_, x| (x[0] * x[0]).mean());
-    assert!(r.worst_rel_error < TOL, "mean: {r}");
     let r = gradcheck(&[Input::Var(vec![0.3])], |_, x| (x[0].broadcast(5) * x[0]).exp());
     assert!(r.worst_rel_error < TOL, "broadcast: {r}");
 }
 
 #[test]
-fn gather_scatter_add_segmented_sum() {
-    let tape = Tape::<f64>::new();
-    let src = tape.constant(&[10.0, 20.0, 30.0]);
-    let idx = tape.constant(&[2.0, 0.0, 2.0, 1.0]);
-    assert_eq!(&*tape.value(src.gather(idx)), &[30.0, 10.0, 30.0, 20.0]);
-    let vals = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
-    assert_eq!(&*tape.value(vals.scatter_add(idx, 4)), &[2.0, 4.0, 4.0, 0.0]);
-    let seg = tape.constant(&[0.0, 0.0, 1.0, 1.0]);
-    assert_eq!(&*tape.value(vals.segmented_sum(seg, 2)), &[3.0, 7.0]);
-    let idx = Input::Const(vec![2.0, 0.0, 2.0, 1.0, 4.0, 4.0, 3.0]);
-    let r = gradcheck(&[Input::Var(uniform(5, -1.0, 1.0, 10)), idx.clone()], |_, x| {
-        x[0].gather(x[1]).exp()
-    });
-    assert!(r.worst_rel_error < TOL, "gather: {r}");
-    let r = gradcheck(&[Input::Var(uniform(7, -1.0, 1.0, 11)), idx], |_, x| {
-        x[0].scatter_add(x[1], 6).sin()
-    });
-    assert!(r.worst_rel_error < TOL, "scatter_add: {r}");
-}
-
-#[test]
-#[should_panic(expected = "gather: index 3 out of range for an array of 3 elements")]
-fn gather_out_of_range_names_the_op() {
-    let tape = Tape::<f32>::new();
-    let src = tape.constant(&[1.0, 2.0, 3.0]);
-    let _ = tape.value(src.gather(tape.constant(&[3.0])));
-}
-
-#[test]
-fn slice_concat_stop_gradient() {
-    let tape = Tape::<f64>::new();
-    let x = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
-    assert_eq!(&*tape.value(x.slice(1, 2)), &[2.0, 3.0]);
-    assert_eq!(
-        &*tape.value(tape.concat(&[x.slice(2, 2), x.slice(0, 1)])),
-        &[3.0, 4.0, 1.0]
-    );
-    let r = gradcheck(&[Input::Var(uniform(6, -1.0, 1.0, 12))], |t, x| {
-        let a = x[0].slice(1, 3).exp();
-        let b = x[0].slice(0, 2) * 3.0;
-        t.concat(&[a, b, a]).sin()
-    });
-    assert!(r.worst_rel_error < TOL, "slice/concat: {r}");
+fn stop_gradient_cuts_the_gradient() {
     let tape = Tape::<f64>::new();
     let x = tape.leaf(&[2.0]);
     tape.backward(x * x.stop_gradient());
@@ -335,31 +290,4 @@ fn scalars_on_the_left() {
     assert_eq!(&*tape.value(8.0 / x), &[4.0, 2.0]);
     assert_eq!(&*tape.value(3.0 * x + 1.0), &[7.0, 13.0]);
     assert_eq!(&*tape.value(-x), &[-2.0, -4.0]);
-}
-
-#[test]
-fn gather_channel_reads_interleaved_data() {
-    let tape = Tape::<f64>::new();
-    let rgb = tape.constant(&[1.0, 2.0, 3.0, 10.0, 20.0, 30.0]);
-    let texel = tape.constant(&[1.0, 0.0, 1.0]);
-    assert_eq!(&*tape.value(rgb.gather_channel(texel, 3, 2)), &[30.0, 3.0, 30.0]);
-    assert_eq!(&*tape.value(rgb.gather_channel(texel, 3, 0)), &[10.0, 1.0, 10.0]);
-    let texel = Input::Const(vec![1.0, 0.0, 3.0, 3.0, 2.0]);
-    let r = gradcheck(&[Input::Var(uniform(12, -1.0, 1.0, 13)), texel], |_, x| {
-        let (r, g, b) = (
-            x[0].gather_channel(x[1], 3, 0),
-            x[0].gather_channel(x[1], 3, 1),
-            x[0].gather_channel(x[1], 3, 2),
-        );
-        (r * g).exp() + b.sin()
-    });
-    assert!(r.worst_rel_error < TOL, "gather_channel: {r}");
-}
-
-#[test]
-#[should_panic(expected = "gather: index 2 out of range for an array of 2 elements")]
-fn gather_channel_checks_the_texel_range() {
-    let tape = Tape::<f32>::new();
-    let rgb = tape.constant(&[1.0, 2.0, 3.0, 10.0, 20.0, 30.0]);
-    let _ = tape.value(rgb.gather_channel(tape.constant(&[2.0]), 3, 0));
 }

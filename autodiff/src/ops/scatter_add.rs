@@ -1,0 +1,92 @@
+//! Scatter-add: `y[idx[i]] += x[i]` into `len` zeros (a segmented sum, e.g.
+//! samples into pixels, when `idx` holds segment ids).
+//!
+//! VJP, with `gx = dL/dx` and `gy = dL/dy`: `gx[i] += gy[idx[i]]`. The
+//! adjoint of a scatter-add is a gather.
+//!
+//! Structural: any element of the domain may add into any output element,
+//! so the output is complete only after the whole domain has run. It ends its
+//! region (a *sink*), and the chunks of a parallel region add into private
+//! copies that are reduced in chunk order (the same result on any number of
+//! threads).
+
+use crate::ops::index::{check_addressable, check_indices};
+use crate::real::Real;
+use crate::tape::{Op, Var};
+
+impl<'t, T: Real> Var<'t, T> {
+    /// `out[indices[i]] += self[i]` into `len` zeros. Adjoint: gather of the
+    /// output's adjoint at `indices`.
+    pub fn scatter_add(self, indices: Self, len: usize) -> Self {
+        self.same_tape(indices, "scatter_add");
+        assert_eq!(
+            self.len(),
+            indices.len(),
+            "scatter_add: shape mismatch: values have shape [{}], indices [{}]",
+            self.len(),
+            indices.len()
+        );
+        assert!(len > 0, "scatter_add: the output needs at least one element");
+        check_addressable::<T>(len, "scatter_add");
+        self.tape.record(Op::ScatterAdd, len, &[self, indices])
+    }
+
+    /// Sums the elements of each segment: `out[s] = sum of self[i] with
+    /// segment_ids[i] = s` (e.g. samples into pixels), `segments` outputs.
+    pub fn segmented_sum(self, segment_ids: Self, segments: usize) -> Self {
+        self.scatter_add(segment_ids, segments)
+    }
+}
+
+/// Forward over one tile: `y[idx[i]] += x[i]`, into the whole output (or a
+/// chunk's private copy of it).
+#[inline]
+pub(crate) fn forward_tile<T: Real>(x: &[T], idx: &[T], y: &mut [T]) {
+    check_indices(idx, y.len(), "scatter_add");
+    for (&x, &i) in x.iter().zip(idx) {
+        // SAFETY: checked above.
+        unsafe { *y.get_unchecked_mut(i.to_index_unchecked()) += x };
+    }
+}
+
+/// VJP over one tile: `gx[i] += gy[idx[i]]`, a gather from the whole output's
+/// adjoint `gy` (`gx = ...` when `accumulate` is false).
+#[inline]
+pub(crate) fn backward_tile<T: Real>(gy: &[T], idx: &[T], gx: &mut [T], accumulate: bool) {
+    check_indices(idx, gy.len(), "scatter_add");
+    let acc = if accumulate { T::one() } else { T::zero() };
+    for (g, &i) in gx.iter_mut().zip(idx) {
+        // SAFETY: checked above.
+        *g = acc.mul_add(*g, unsafe { *gy.get_unchecked(i.to_index_unchecked()) });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::Tape;
+    use crate::gradcheck::{Input, gradcheck, uniform};
+    use crate::ops::tests::TOL;
+
+    #[test]
+    fn scatter_add_and_segmented_sum() {
+        let tape = Tape::<f64>::new();
+        let idx = tape.constant(&[2.0, 0.0, 2.0, 1.0]);
+        let vals = tape.constant(&[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(&*tape.value(vals.scatter_add(idx, 4)), &[2.0, 4.0, 4.0, 0.0]);
+        let seg = tape.constant(&[0.0, 0.0, 1.0, 1.0]);
+        assert_eq!(&*tape.value(vals.segmented_sum(seg, 2)), &[3.0, 7.0]);
+        let idx = Input::Const(vec![2.0, 0.0, 2.0, 1.0, 4.0, 4.0, 3.0]);
+        let r = gradcheck(&[Input::Var(uniform(7, -1.0, 1.0, 11)), idx], |_, x| {
+            x[0].scatter_add(x[1], 6).sin()
+        });
+        assert!(r.worst_rel_error < TOL, "scatter_add: {r}");
+    }
+
+    #[test]
+    #[should_panic(expected = "scatter_add: index 2 out of range for an array of 2 elements")]
+    fn scatter_add_out_of_range_names_the_op() {
+        let tape = Tape::<f32>::new();
+        let vals = tape.constant(&[1.0, 2.0]);
+        let _ = tape.value(vals.scatter_add(tape.constant(&[0.0, 2.0]), 2));
+    }
+}
