@@ -8,10 +8,12 @@
 use std::f32::consts::PI;
 use std::path::Path;
 
+use autodiff::Real;
 use glam::{Vec2, Vec3};
 
 use crate::error::{RenderError, Result};
 use crate::image_io::RgbImage;
+use crate::lookup::env_taps;
 
 /// The (u, v) in [0, 1) x [0, 1] of a unit direction.
 pub fn direction_to_uv(direction: Vec3) -> Vec2 {
@@ -172,10 +174,8 @@ impl EnvMap {
         out
     }
 
-    /// Box-filters the map down to `height` rows (and 2 x `height` columns).
-    ///
-    /// Each new texel is the solid-angle-weighted mean of the old texels it overlaps (fractional
-    /// overlaps allowed), so the total power (sum of radiance x solid angle) is preserved.
+    /// Box-filters the map down to `height` rows (and 2 x `height` columns),
+    /// keeping its power (see [`resample`]).
     pub fn downsample(&self, height: usize) -> Self {
         assert!(
             height > 0 && height <= self.height,
@@ -183,25 +183,75 @@ impl EnvMap {
             self.height
         );
         let width = 2 * height;
-        // Weights are separable: overlap in u (uniform), times overlap in cos(theta) (solid angle).
-        let col_weights = overlaps(self.width, width, |x| x);
-        let row_weights = overlaps(self.height, height, |v| (PI * v).cos());
-        let mut radiance = vec![[0.0f32; 3]; width * height];
-        for &(new_row, old_row, wy) in &row_weights {
-            for &(new_col, old_col, wx) in &col_weights {
-                let t = self.texel(old_row, old_col);
-                let out = &mut radiance[new_row * width + new_col];
-                for c in 0..3 {
-                    out[c] += wx * wy * t[c];
-                }
-            }
-        }
+        let texels: Vec<f32> = self.radiance.iter().flatten().copied().collect();
+        let resampled = resample(&texels, (self.width, self.height), (width, height));
         Self {
             width,
             height,
-            radiance,
+            radiance: resampled.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
         }
     }
+}
+
+/// A texel-major RGB map of size `from` (width, height) at size `to`, in the
+/// precision it comes in: box-filtered down, each new texel the
+/// solid-angle-weighted mean of the old texels it overlaps (fractional
+/// overlaps allowed), which keeps the total power (a light finer than the
+/// new texels keeps its energy); bilinear up, with the lookup's taps
+/// ([`env_taps`]). One way or the other in both directions: a size that
+/// grows in one and shrinks in the other is refused.
+pub fn resample<T: Real>(texels: &[T], from: (usize, usize), to: (usize, usize)) -> Vec<T> {
+    assert_eq!(
+        texels.len(),
+        from.0 * from.1 * 3,
+        "resample: a {}x{} map needs {} values",
+        from.0,
+        from.1,
+        from.0 * from.1 * 3
+    );
+    if from == to {
+        return texels.to_vec();
+    }
+    let down = to.0 <= from.0 && to.1 <= from.1;
+    assert!(
+        down || (to.0 >= from.0 && to.1 >= from.1),
+        "resample: {}x{} to {}x{} neither grows nor shrinks",
+        from.0,
+        from.1,
+        to.0,
+        to.1
+    );
+    let mut out = vec![T::zero(); to.0 * to.1 * 3];
+    if down {
+        // Weights are separable: overlap in u (uniform), times overlap in cos(theta) (solid angle).
+        let col_weights = overlaps(from.0, to.0, |x| x);
+        let row_weights = overlaps(from.1, to.1, |v| (PI * v).cos());
+        for &(new_row, old_row, wy) in &row_weights {
+            for &(new_col, old_col, wx) in &col_weights {
+                let (old, new) = ((old_row * from.0 + old_col) * 3, (new_row * to.0 + new_col) * 3);
+                let w = T::c((wx * wy) as f64);
+                for c in 0..3 {
+                    out[new + c] += w * texels[old + c];
+                }
+            }
+        }
+        return out;
+    }
+    for r in 0..to.1 {
+        for c in 0..to.0 {
+            let u = (c as f32 + 0.5) / to.0 as f32;
+            let v = (r as f32 + 0.5) / to.1 as f32;
+            let (taps, weights) = env_taps(Vec2::new(u, v), from.0, from.1);
+            for ch in 0..3 {
+                out[(r * to.0 + c) * 3 + ch] = taps
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&t, &w)| T::c(w as f64) * texels[t as usize * 3 + ch])
+                    .fold(T::neg_zero(), |sum, x| sum + x);
+            }
+        }
+    }
+    out
 }
 
 /// For a resampling from `old` to `new` cells of [0, 1] with measure `|cdf(b) - cdf(a)|`, the
@@ -298,6 +348,29 @@ mod tests {
                 assert_abs_diff_eq!(t[2], 1.0, epsilon = 1e-5);
             }
         }
+    }
+
+    #[test]
+    fn resampling_up_reads_the_map_as_its_lookup_does() {
+        let (w, h) = (16, 8);
+        let radiance: Vec<[f32; 3]> = (0..w * h)
+            .map(|i| [(i % 7) as f32, (i % 5) as f32 + 0.5, 1.0])
+            .collect();
+        let env = EnvMap::new(w, h, radiance.clone()).unwrap();
+        let texels: Vec<f64> = radiance.iter().flatten().map(|&v| v as f64).collect();
+        let (to_w, to_h) = (40, 20);
+        let up = resample(&texels, (w, h), (to_w, to_h));
+        for r in 0..to_h {
+            for c in 0..to_w {
+                let uv = Vec2::new((c as f32 + 0.5) / to_w as f32, (r as f32 + 0.5) / to_h as f32);
+                let want = env.lookup(uv_to_direction(uv));
+                for ch in 0..3 {
+                    let got = up[(r * to_w + c) * 3 + ch];
+                    assert_abs_diff_eq!(got, want[ch] as f64, epsilon = 1e-4);
+                }
+            }
+        }
+        assert_eq!(resample(&texels, (w, h), (w, h)), texels, "the same size as it is");
     }
 
     #[test]

@@ -12,7 +12,7 @@ pub mod solve;
 use std::time::Instant;
 
 use optim::Termination;
-use render::envmap::EnvMap;
+use render::envmap::{EnvMap, resample};
 use render::image_io::RgbImage;
 use render::integrator::{LightSampling, PrimaryHits, RenderSettings};
 use render::pose::Pose;
@@ -20,7 +20,7 @@ use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
-pub use solve::{LightingSolve, Smoothness, Solved, pyramid, resample, solve};
+pub use solve::{LightingSolve, Smoothness, Solved, pyramid, solve};
 
 use super::Probe;
 use super::photo::{Photo, Pixels, usable_pixel};

@@ -6,9 +6,6 @@
 use optim::{Bounds, Lbfgs, Solver, Termination};
 use serde::Serialize;
 
-use glam::Vec2;
-
-use render::lookup::env_taps;
 use render::transport::{PullBackScratch, Transport};
 
 use crate::error::{Error, Result};
@@ -21,33 +18,6 @@ pub fn pyramid(size: (usize, usize), coarsest: usize) -> Vec<(usize, usize)> {
         heights.insert(0, heights[0] / 2);
     }
     heights.into_iter().map(|h| (2 * h, h)).collect()
-}
-
-/// Bilinear resampling of a texel-major RGB map from size `from` up to `to`
-/// (FORMATS.md lookups: texel centres at +0.5, wrap in u, clamp in v). Not
-/// for going down: its taps would miss most texels of a block, and a light
-/// among them (`EnvMap::downsample` keeps the power).
-pub fn resample(texels: &[f64], from: (usize, usize), to: (usize, usize)) -> Vec<f64> {
-    if from == to {
-        return texels.to_vec();
-    }
-    let mut out = Vec::with_capacity(to.0 * to.1 * 3);
-    for r in 0..to.1 {
-        for c in 0..to.0 {
-            let u = (c as f32 + 0.5) / to.0 as f32;
-            let v = (r as f32 + 0.5) / to.1 as f32;
-            let (taps, weights) = env_taps(Vec2::new(u, v), from.0, from.1);
-            for ch in 0..3 {
-                out.push(
-                    taps.iter()
-                        .zip(&weights)
-                        .map(|(&t, &w)| w as f64 * texels[t as usize * 3 + ch])
-                        .sum(),
-                );
-            }
-        }
-    }
-    out
 }
 
 /// The smoothness prior of a lighting solve: neighbouring texels'
@@ -309,6 +279,7 @@ impl Prior {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec2;
 
     /// Solves for a map every texel of which one pixel reads directly (one
     /// sample per texel centre, `throughput(texel)`), from a constant start
