@@ -25,15 +25,9 @@ use crate::{RenderError, Result};
 /// One entry of the transport: a texel and the RGB weight with which it
 /// reaches a pixel, in quanta of the pixel's row ([`Transport::new`]).
 /// Eight bytes where a u32 texel and f32 weights took sixteen: a solve
-/// streams the whole transport at each of its hundreds of evaluations, and
-/// a 64-spp transport (3M entries on a 13k-pixel can) then fits in the
-/// machine's last-level cache. With two running sums per row, the known-pose
-/// lighting phases of `cargo bench --bench lighting_solve` (2 threads) took
-/// 1.80 s instead of 2.77 at 32 spp and 5.05 instead of 8.10 at 128, at
-/// the same PSNR (texels then padded to four f64 lanes, which the compiler
-/// did not vectorise: unpadded, 1.86 and 5.31 s against 1.94 and 4.96
-/// measured alongside, the same results; the lanes are now explicit, see
-/// [`lanes`]).
+/// streams the whole transport at each of its hundreds of evaluations, so
+/// its time goes with the transport's bytes (and a small probe's transport
+/// can stay in the last-level cache). See docs/results.md, Lighting solve.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(8))]
 pub(crate) struct Entry {
@@ -366,17 +360,12 @@ impl Transport {
     /// residual(p, rendered_p)` depends on pixel p's radiance alone (a
     /// least-squares gradient): one pass over the rows instead of two, each
     /// row still in cache when its residual goes back. The solve's every
-    /// iteration needs both, and they are bound by memory traffic: on a
-    /// 43k-pixel cap at 128 spp (6.7M entries of 16 bytes) the solves and transport
-    /// builds took 4.5 s of the final phase's 6.5 s with a pass each (the
-    /// finest level's 111 evaluations 2.2 s with one). The transposed
-    /// products sum per chunk of [`PIXEL_CHUNK`] pixels into `scratch`
-    /// (reused from call to call), the chunks then in order: the same sums
-    /// whatever the thread count. Rows, radiances and sums go four lanes
-    /// at a time ([`lanes`]): with AVX2, the final phases (sampling,
-    /// transport and solve) of six of the suite's Mitsuba twins at their
-    /// true poses took 51.9 s instead of 60.4 (paired runs, 2 threads),
-    /// with the same maps, byte for byte.
+    /// iteration needs both, and they are bound by memory traffic, which one
+    /// pass halves. The transposed products sum per chunk of [`PIXEL_CHUNK`]
+    /// pixels into `scratch` (reused from call to call), the chunks then in
+    /// order: the same sums whatever the thread count. Rows, radiances and
+    /// sums go four lanes at a time ([`lanes`]): a whole entry is converted,
+    /// multiplied and added at once, with the same sums as plain arrays.
     pub fn apply_and_pull_back(
         &self,
         env: &[f64],

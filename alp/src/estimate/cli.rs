@@ -58,7 +58,7 @@ pub struct EstimateArgs {
     /// Search the probe's size in the photo by the lighting's fit (steps of
     /// half a pixel at the mask's radius), before the photo judges a
     /// cap's ends or a label's turns: for a mask that may be a pixel or two
-    /// too wide or too narrow. About 2 s more.
+    /// too wide or too narrow. Costs a few lighting solves more.
     #[arg(long)]
     pub size_search: bool,
 }

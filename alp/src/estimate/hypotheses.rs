@@ -231,9 +231,9 @@ pub fn initial_pose(mesh: &Mesh, camera: &Camera, shape: &MaskShape, axis: Vec3)
 /// end for end (half a turn about its mesh X axis: the same outline where
 /// its two ends have like outlines), and both. A silhouette fit stops on
 /// whichever of them is nearest its start, or, between two mirror images,
-/// on the saddle where the axis crosses the view ray square (the cap of
-/// tests/estimate.rs, 10 deg from square, stopped there 5.3 deg off its
-/// axis): the twins of an axis within `HypothesisSettings::upright_lean_deg` of square lean
+/// on the saddle where the axis crosses the view ray square (a cap 10 deg
+/// from square can stop there several degrees off its axis): the twins of an axis
+/// within `HypothesisSettings::upright_lean_deg` of square lean
 /// `HypothesisSettings::twin_lean_deg` towards and away from the camera, each also end for
 /// end.
 pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera, h: &HypothesisSettings) -> Vec<Pose> {
@@ -394,8 +394,8 @@ mod tests {
         let start = initial_pose(&probe.mesh, &camera, &shape, camera.up);
         let centre = Vec3::new(0.0, 0.061, 0.0);
         let err = (start.transform_point(centre) - truth.transform_point(centre)).length();
-        // Measured 0.013 m with the depth from the extent the turned mesh
-        // shows (0.028 m from the mesh's 3D bounding box diagonal).
+        // About 0.013 m with the depth from the extent the turned mesh shows;
+        // a depth from the mesh's 3D bounding box diagonal fails (0.028 m).
         assert!(err < 0.02, "start is {err} m from the truth");
         let axis = start.rotation * Vec3::Y;
         assert!(
@@ -425,9 +425,9 @@ mod tests {
             assert_eq!(flags, expected, "the can reaches the {cut} side only");
             let start = initial_pose(&probe.mesh, &camera, &shape, camera.up);
             let shown = |pose: &Pose| camera.project(pose.transform_point(centre)).expect("in front");
-            // Measured 0.9 to 1.3 px off and 0.95 to 0.97 of the depth;
-            // started as a whole mask is (on its barycenter, the depth from
-            // its diagonal), 4.3 to 8.7 px and 1.00 to 1.39.
+            // About 1 px off and 0.95 to 0.97 of the depth; started as a
+            // whole mask is (on its barycenter, the depth from its diagonal),
+            // it fails (4 to 9 px off, up to 1.39 of the depth).
             let off = (shown(&start) - shown(&truth)).length();
             assert!(off < 2.5, "cut at the {cut}: the start's centre shows {off} px off");
             let depth = |pose: &Pose| (pose.transform_point(centre) - camera.origin).dot(camera.forward);

@@ -22,7 +22,7 @@ use super::lighting::{
 use super::photo::{Photo, Pixels};
 use super::ranking::{best_ranked, mean_rgb_angle_deg, renders_alike, rival_starts};
 use super::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
-use super::settings::Settings;
+use super::settings::{OrientationSettings, Settings};
 use super::silhouette::{
     PoseContext, PoseSteps, fit_pose_to_image, fit_silhouette, polish_silhouette, refit_silhouette, silhouette_loss,
 };
@@ -47,31 +47,12 @@ pub(super) struct PoseSearch {
 }
 
 /// A start's refit (if any), ranking phase, account and pose.
-pub(super) type RankedStart = (Option<PhaseReport>, PhaseReport, StartReport, Pose);
-
-/// Logs ranked starts in order and keeps their accounts and poses.
-pub(super) fn record(
-    ranked: Vec<Result<RankedStart>>,
-    phases: &mut PhaseLog,
-    starts: &mut Vec<StartReport>,
-    candidates: &mut Vec<Pose>,
-) -> Result<()> {
-    for result in ranked {
-        let (refit, ranking, account, pose) = result?;
-        if let Some(refit) = refit {
-            phases.expect_more(1);
-            phases.push(refit);
-        }
-        phases.push(ranking);
-        starts.push(account);
-        candidates.push(pose);
-    }
-    Ok(())
-}
+type RankedStart = (Option<PhaseReport>, PhaseReport, StartReport, Pose);
 
 /// The pose search (see the module's description): axis hypotheses by
-/// silhouette, their turns ranked by re-rendering colour error, then
-/// alternation of pose and lighting from the best start.
+/// silhouette, their turns ranked by re-rendering colour error, the chosen
+/// pose and its rivals polished; on request, joint rounds of pose and
+/// lighting from the chosen pose.
 pub(super) fn search_pose(
     probe: &Probe,
     photo: &Photo,
@@ -95,15 +76,37 @@ pub(super) fn search_pose(
     if o.starts_deg.is_empty() {
         return Err(Error::invalid("starts", "at least one orientation start is needed"));
     }
-    // The objective's smoothness weight (applied by the linear solve) while
-    // the pose is searched: a detailed map would explain a misplaced texture
-    // away (texture baked into the light) and hide the pose error from the
-    // image loss. The final solve uses the settings' (weaker) smoothness.
-    let search_smoothness = settings.objective.smoothness_weight(1.0).unwrap_or(0.0);
-    let ranking_render = RenderSettings {
-        spp: o.ranking_spp,
-        seed: settings.seed,
+    let (mut axes, axis_poses) = fit_axes(&ctx, settings, phases)?;
+    let kept = keep_axes(&mut axes, o);
+    phases.expect_more((kept.len() - 1) * o.starts_deg.len());
+    let ranker = Ranker {
+        ctx: &ctx,
+        settings,
+        axis_poses: &axis_poses,
     };
+    let ranked = ranker.rank(&kept, phases)?;
+    let chosen_pose = ranked.poses[ranked.chosen];
+    let (pose, rivals) = polish(&ctx, chosen_pose, ranked.rivals, settings, phases)?;
+    let pose = joint_rounds(&ctx, pose, work, settings, phases)?;
+    Ok(PoseSearch {
+        pose,
+        rivals,
+        axes,
+        starts: ranked.reports,
+        chosen: ranked.chosen,
+        symmetric: ranked.symmetric,
+    })
+}
+
+/// Each axis hypothesis's account, and its fitted pose and silhouette loss.
+type AxisFits = (Vec<AxisReport>, Vec<(Pose, f64)>);
+
+/// Every axis hypothesis fitted to the outline (at several turns for a
+/// probe whose outline a turn changes, the best kept), then the outline
+/// twins of each that fits, fitted likewise: each axis's account, pose and
+/// silhouette loss.
+fn fit_axes(ctx: &PoseContext, settings: &Settings, phases: &mut PhaseLog) -> Result<AxisFits> {
+    let (probe, photo, o) = (ctx.probe, ctx.photo, &settings.orientation);
     let mesh = &probe.asset.mesh;
     let shape = hypotheses::MaskShape::new(&photo.mask)?;
     let hypotheses = hypotheses::axis_hypotheses(&photo.camera, &shape, mesh, probe.top_known, &settings.hypotheses);
@@ -130,14 +133,8 @@ pub(super) fn search_pose(
         })
         .map(|start| {
             let progress = 0.0..settings.outline.progress;
-            fit_silhouette(
-                &ctx,
-                "silhouette",
-                start,
-                (settings.outline.iters, PoseSteps::Full),
-                progress,
-                settings.seed,
-            )
+            let iters = (settings.outline.iters, PoseSteps::Full);
+            fit_silhouette(ctx, "silhouette", start, iters, progress, settings.seed)
         })
         .collect();
     let mut axes = Vec::new();
@@ -189,7 +186,7 @@ pub(super) fn search_pose(
     phases.expect_more(twins.len());
     let fitted: Vec<Result<_>> = twins
         .par_iter()
-        .map(|&(_, twin)| refit_silhouette(&ctx, "silhouette_twin", twin, settings))
+        .map(|&(_, twin)| refit_silhouette(ctx, "silhouette_twin", twin, settings))
         .collect();
     for (result, (a, twin)) in fitted.into_iter().zip(twins) {
         let (pose, loss, report) = result?;
@@ -203,6 +200,13 @@ pub(super) fn search_pose(
         });
         axis_poses.push((pose, loss));
     }
+    Ok((axes, axis_poses))
+}
+
+/// The axes whose turns are ranked: the best-fitting distinct ones, at most
+/// `OrientationSettings::axes_kept`, within `axis_keep_ratio` of the best
+/// (marked kept in their accounts), best first.
+fn keep_axes(axes: &mut [AxisReport], o: &OrientationSettings) -> Vec<usize> {
     let mut order: Vec<usize> = (0..axes.len()).collect();
     order.sort_by(|&a, &b| axes[a].silhouette_loss.total_cmp(&axes[b].silhouette_loss));
     let best_loss = axes[order[0]].silhouette_loss;
@@ -218,31 +222,184 @@ pub(super) fn search_pose(
         }
     }
     kept.iter().for_each(|&k| axes[k].kept = true);
-    phases.expect_more((kept.len() - 1) * o.starts_deg.len());
-    // One start: the turned pose, refitted to the silhouette if the turn
-    // changed it, then ranked.
-    let rank_turn = |a: usize, yaw: f32, refinement: bool| -> Result<RankedStart> {
-        let (axis_pose, axis_loss) = axis_poses[a];
-        let turned = hypotheses::turned(&axis_pose, mesh, yaw);
-        let loss = silhouette_loss(&ctx, &turned, settings.seed)?;
+    kept
+}
+
+/// The ranked starts: each one's account and pose, in the order ranked.
+#[derive(Default)]
+struct Starts {
+    reports: Vec<StartReport>,
+    poses: Vec<Pose>,
+}
+
+impl Starts {
+    /// Logs ranked starts in order and keeps their accounts and poses.
+    fn record(&mut self, ranked: Vec<Result<RankedStart>>, phases: &mut PhaseLog) -> Result<()> {
+        for result in ranked {
+            let (refit, ranking, account, pose) = result?;
+            if let Some(refit) = refit {
+                phases.expect_more(1);
+                phases.push(refit);
+            }
+            phases.push(ranking);
+            self.reports.push(account);
+            self.poses.push(pose);
+        }
+        Ok(())
+    }
+}
+
+/// What the ranking chose: every start, the chosen one, its rivals, and
+/// whether the probe rendered alike turned.
+struct Ranked {
+    reports: Vec<StartReport>,
+    poses: Vec<Pose>,
+    chosen: usize,
+    rivals: Vec<Pose>,
+    symmetric: bool,
+}
+
+/// Turns of the fitted axes, ranked by colour.
+struct Ranker<'a> {
+    ctx: &'a PoseContext<'a>,
+    settings: &'a Settings,
+    /// Each axis's fitted pose and silhouette loss.
+    axis_poses: &'a [(Pose, f64)],
+}
+
+impl Ranker<'_> {
+    /// The starts of the `kept` axes ranked: the first axis's first two
+    /// turns tell whether the probe renders alike turned (unless the asset
+    /// tells), then every other start; the best one's yaw refined, and its
+    /// rivals found.
+    fn rank(&self, kept: &[usize], phases: &mut PhaseLog) -> Result<Ranked> {
+        let o = &self.settings.orientation;
+        let mut starts = Starts::default();
+        // A probe symmetric about its axis (a cap of one colour) renders alike
+        // at every turn: its asset tells, or else two turns of the first axis
+        // do, and then one turn per axis is all there is to rank, and no yaw to
+        // refine.
+        let tells = o.starts_deg.len().min(2);
+        let first: Vec<(usize, f32)> = o.starts_deg[..tells].iter().map(|&yaw| (kept[0], yaw)).collect();
+        starts.record(self.rank_all(&first, false), phases)?;
+        let symmetric = match self.ctx.probe.alike_turned {
+            Some(alike) => alike,
+            None => tells == 2 && renders_alike(&starts.reports[0], &starts.reports[1], o),
+        };
+        let rest: Vec<(usize, f32)> = kept
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &a)| {
+                let yaws = match (k, symmetric) {
+                    (0, true) => &[][..],
+                    (0, false) => &o.starts_deg[tells..],
+                    (_, true) => &o.starts_deg[..1],
+                    (_, false) => &o.starts_deg[..],
+                };
+                yaws.iter().map(move |&yaw| (a, yaw))
+            })
+            .collect();
+        phases.expect_fewer(kept.len() * o.starts_deg.len() - first.len() - rest.len());
+        starts.record(self.rank_all(&rest, false), phases)?;
+        // Colour ranks the starts of a probe with a pattern. A probe symmetric
+        // about its axis shows none: a coarse map explains it about as well
+        // either end up, and the starts go by their outlines.
+        let best = best_ranked(&starts.reports, 0..starts.reports.len(), symmetric, o).expect("at least one start");
+        let chosen = self.refine_yaw(best, symmetric, &mut starts, phases)?;
+        let axis = starts.poses[chosen].rotation * Vec3::Y;
+        let rivals = match symmetric {
+            true => self
+                .axis_poses
+                .iter()
+                .filter(|(p, loss)| {
+                    let chosen_loss = starts.reports[chosen].silhouette_loss;
+                    (p.rotation * Vec3::Y).dot(axis) < 0.0 && *loss <= o.rival_end_ratio * chosen_loss
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(p, _)| *p)
+                .into_iter()
+                .collect(),
+            false => {
+                let mut rivals = Vec::new();
+                for k in rival_starts(&starts.reports, &starts.poses, chosen, o) {
+                    let refined = self.refine_yaw(k, symmetric, &mut starts, phases)?;
+                    rivals.push(starts.poses[refined]);
+                }
+                rivals
+            }
+        };
+        Ok(Ranked {
+            reports: starts.reports,
+            poses: starts.poses,
+            chosen,
+            rivals,
+            symmetric,
+        })
+    }
+
+    /// Start `best`'s yaw refined by halving steps about it (the starts are
+    /// a coarse grid; the image loss alone pulls a turn in only slowly);
+    /// none for a `symmetric` probe. Returns the best start.
+    fn refine_yaw(
+        &self,
+        mut best: usize,
+        symmetric: bool,
+        starts: &mut Starts,
+        phases: &mut PhaseLog,
+    ) -> Result<usize> {
+        let o = &self.settings.orientation;
+        let mut step = match symmetric {
+            true => 0.0,
+            false => 180.0 / o.starts_deg.len() as f32,
+        };
+        while step >= o.yaw_refine_deg {
+            let (a, yaw) = (starts.reports[best].axis, starts.reports[best].yaw_deg);
+            phases.expect_more(2);
+            let tried = starts.reports.len();
+            starts.record(self.rank_all(&[(a, yaw - step), (a, yaw + step)], true), phases)?;
+            let among = std::iter::once(best).chain(tried..starts.reports.len());
+            best = best_ranked(&starts.reports, among, symmetric, o).unwrap_or(best);
+            step *= 0.5;
+        }
+        Ok(best)
+    }
+
+    /// The turns `(axis, yaw)` ranked side by side, in order.
+    fn rank_all(&self, turns: &[(usize, f32)], refinement: bool) -> Vec<Result<RankedStart>> {
+        turns
+            .par_iter()
+            .map(|&(a, yaw)| self.rank_turn(a, yaw, refinement))
+            .collect()
+    }
+
+    /// One start: axis `a`'s pose turned by `yaw`, refitted to the
+    /// silhouette if the turn changed it, then ranked under a coarse, smooth
+    /// map: a wrong orientation puts the probe's texture in the wrong place,
+    /// which only a detailed map could explain away (texture baked into the
+    /// light).
+    fn rank_turn(&self, a: usize, yaw: f32, refinement: bool) -> Result<RankedStart> {
+        let (ctx, settings, o) = (self.ctx, self.settings, &self.settings.orientation);
+        let (axis_pose, axis_loss) = self.axis_poses[a];
+        let turned = hypotheses::turned(&axis_pose, &ctx.probe.asset.mesh, yaw);
+        let loss = silhouette_loss(ctx, &turned, settings.seed)?;
         let (pose, loss, refit) = if loss > o.turn_refit_ratio * axis_loss {
-            let (pose, loss, report) = refit_silhouette(&ctx, "silhouette_turn", turned, settings)?;
+            let (pose, loss, report) = refit_silhouette(ctx, "silhouette_turn", turned, settings)?;
             (pose, loss, Some(report))
         } else {
             (turned, loss, None)
         };
         let t1 = Instant::now();
-        // Ranked under a coarse, smooth map: a wrong orientation puts the
-        // probe's texture in the wrong place, which only a detailed map
-        // could explain away (texture baked into the light).
         let coarse = fit_lighting(
-            probe,
-            photo,
-            clipped,
+            ctx.probe,
+            ctx.photo,
+            ctx.clipped,
             &pose,
             &FitRequest {
                 size: o.ranking_size,
-                render: ranking_render,
+                render: RenderSettings {
+                    spp: o.ranking_spp,
+                    seed: settings.seed,
+                },
                 sampling: LightSampling::BSDF,
                 smoothness: Smoothness::quadratic(o.ranking_smoothness),
                 purpose: LightingPurpose::Search,
@@ -264,108 +421,26 @@ pub(super) fn search_pose(
             relative_error: coarse.weighted_sq_error(),
         };
         Ok((refit, ranking, account, pose))
-    };
-    let mut starts = Vec::new();
-    let mut candidates = Vec::new();
-    // A probe symmetric about its axis (a cap of one colour) renders alike
-    // at every turn: its asset tells, or else two turns of the first axis
-    // do, and then one turn per axis is all there is to rank, and no yaw to
-    // refine.
-    let tells = o.starts_deg.len().min(2);
-    let first: Vec<(usize, f32)> = o.starts_deg[..tells].iter().map(|&yaw| (kept[0], yaw)).collect();
-    record(
-        first.par_iter().map(|&(a, yaw)| rank_turn(a, yaw, false)).collect(),
-        phases,
-        &mut starts,
-        &mut candidates,
-    )?;
-    let symmetric = match probe.alike_turned {
-        Some(alike) => alike,
-        None => tells == 2 && renders_alike(&starts[0], &starts[1], o),
-    };
-    let rest: Vec<(usize, f32)> = kept
-        .iter()
-        .enumerate()
-        .flat_map(|(k, &a)| {
-            let yaws = match (k, symmetric) {
-                (0, true) => &[][..],
-                (0, false) => &o.starts_deg[tells..],
-                (_, true) => &o.starts_deg[..1],
-                (_, false) => &o.starts_deg[..],
-            };
-            yaws.iter().map(move |&yaw| (a, yaw))
-        })
-        .collect();
-    phases.expect_fewer(kept.len() * o.starts_deg.len() - first.len() - rest.len());
-    record(
-        rest.par_iter().map(|&(a, yaw)| rank_turn(a, yaw, false)).collect(),
-        phases,
-        &mut starts,
-        &mut candidates,
-    )?;
-    // A start's yaw refined by halving steps about it (the starts are a
-    // coarse grid; the image loss alone pulls a turn in only slowly).
-    let first_step = match symmetric {
-        true => 0.0,
-        false => 180.0 / o.starts_deg.len() as f32,
-    };
-    let mut refine = |mut best: usize, starts: &mut Vec<StartReport>, candidates: &mut Vec<Pose>| -> Result<usize> {
-        let mut step = first_step;
-        while step >= o.yaw_refine_deg {
-            let (a, yaw) = (starts[best].axis, starts[best].yaw_deg);
-            phases.expect_more(2);
-            let ranked = [yaw - step, yaw + step]
-                .par_iter()
-                .map(|&y| rank_turn(a, y, true))
-                .collect();
-            let tried = starts.len();
-            record(ranked, phases, starts, candidates)?;
-            best = best_ranked(starts, std::iter::once(best).chain(tried..starts.len()), symmetric, o).unwrap_or(best);
-            step *= 0.5;
-        }
-        Ok(best)
-    };
-    // Colour ranks the starts of a probe with a pattern. A probe symmetric
-    // about its axis shows none: a coarse map explains it about as well
-    // either end up (a lying cap of one colour: 7.76 deg upside down, 7.82
-    // the right way up), and the starts go by their outlines (at default
-    // quality the least silhouette loss was within 1 deg of the true axis
-    // on all 9 cap scenes of the suite). Their margin between a cap's ends can be small: on
-    // the lying courtyard cap the two ends' silhouette losses are 1.6 %
-    // apart (38 % under SoftRas, whose limb bias made much of it), and the
-    // suite's default run took the right end, its fast run the wrong one.
-    let best = best_ranked(&starts, 0..starts.len(), symmetric, o).expect("at least one start");
-    let chosen = refine(best, &mut starts, &mut candidates)?;
-    let axis = candidates[chosen].rotation * Vec3::Y;
-    let rivals = match symmetric {
-        true => axis_poses
-            .iter()
-            .filter(|(p, loss)| {
-                (p.rotation * Vec3::Y).dot(axis) < 0.0 && *loss <= o.rival_end_ratio * starts[chosen].silhouette_loss
-            })
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(p, _)| *p)
-            .into_iter()
-            .collect(),
-        false => {
-            let mut rivals = Vec::new();
-            for k in rival_starts(&starts, &candidates, chosen, o) {
-                let refined = refine(k, &mut starts, &mut candidates)?;
-                rivals.push(candidates[refined]);
-            }
-            rivals
-        }
-    };
-    // The rivals polished as the chosen pose is, for a fair test (side by
-    // side, as the axes' fits run).
-    let polished: Vec<_> = std::iter::once(candidates[chosen])
+    }
+}
+
+/// The chosen pose and its rivals polished on to the outline's optimum,
+/// side by side (the rivals as the chosen pose is, for a fair test).
+fn polish(
+    ctx: &PoseContext,
+    chosen: Pose,
+    rivals: Vec<Pose>,
+    settings: &Settings,
+    phases: &mut PhaseLog,
+) -> Result<(Pose, Vec<Pose>)> {
+    let polished: Vec<_> = std::iter::once(chosen)
         .chain(rivals)
         .collect::<Vec<_>>()
         .into_par_iter()
-        .map(|pose| polish_silhouette(&ctx, pose, settings))
+        .map(|pose| polish_silhouette(ctx, pose, settings))
         .collect();
     let mut polished = polished.into_iter();
-    let (mut pose, report) = polished.next().expect("the chosen pose")?;
+    let (pose, report) = polished.next().expect("the chosen pose")?;
     phases.expect_more(1);
     phases.push(report);
     let mut rivals = Vec::new();
@@ -375,22 +450,40 @@ pub(super) fn search_pose(
         phases.push(report);
         rivals.push(rival);
     }
-    let depth = (pose.translation - photo.camera.origin).length();
+    Ok((pose, rivals))
+}
+
+/// `JointSettings::rounds` of the pose by Adam on the whole objective under
+/// the map solved at the pose so far (at `work`), each followed by the map
+/// at the new pose but the last (the output's own solve follows). The
+/// objective's smoothness weight is the map's: a detailed map would explain
+/// a misplaced texture away and hide the pose error from the image loss.
+fn joint_rounds(
+    ctx: &PoseContext,
+    mut pose: Pose,
+    work: (usize, usize),
+    settings: &Settings,
+    phases: &mut PhaseLog,
+) -> Result<Pose> {
+    if settings.joint.rounds == 0 {
+        return Ok(pose);
+    }
+    let search_smoothness = settings.objective.smoothness_weight(1.0).unwrap_or(0.0);
+    let depth = (pose.translation - ctx.photo.camera.origin).length();
     // The search-resolution map, from `start` (or from scratch), reported.
-    let joint_render = RenderSettings {
-        spp: settings.joint.spp,
-        seed: settings.seed,
-    };
     let search_lighting = |pose: &Pose, start: Option<&[f64]>, phases: &mut PhaseLog| -> Result<LightingFit> {
         let t1 = Instant::now();
         let fit = fit_lighting(
-            probe,
-            photo,
-            clipped,
+            ctx.probe,
+            ctx.photo,
+            ctx.clipped,
             pose,
             &FitRequest {
                 size: work,
-                render: joint_render,
+                render: RenderSettings {
+                    spp: settings.joint.spp,
+                    seed: settings.seed,
+                },
                 sampling: LightSampling::BSDF,
                 smoothness: Smoothness::quadratic(search_smoothness),
                 purpose: LightingPurpose::Search,
@@ -403,26 +496,16 @@ pub(super) fn search_pose(
         phases.push(lighting_report("lighting", &fit, t1));
         Ok(fit)
     };
-    if settings.joint.rounds > 0 {
-        let mut fit = search_lighting(&pose, None, phases)?;
-        for round in 0..settings.joint.rounds {
-            let env = env_from_texels(&fit.env, work.0, work.1)?;
-            let (new_pose, report) = fit_pose_to_image(&ctx, pose, &env, settings, depth, round)?;
-            phases.push(report);
-            pose = new_pose;
-            if round + 1 == settings.joint.rounds {
-                // The output's own solve follows.
-                break;
-            }
-            fit = search_lighting(&pose, Some(&fit.env), phases)?;
+    let mut fit = search_lighting(&pose, None, phases)?;
+    for round in 0..settings.joint.rounds {
+        let env = env_from_texels(&fit.env, work.0, work.1)?;
+        let (new_pose, report) = fit_pose_to_image(ctx, pose, &env, settings, depth, round)?;
+        phases.push(report);
+        pose = new_pose;
+        if round + 1 == settings.joint.rounds {
+            break;
         }
+        fit = search_lighting(&pose, Some(&fit.env), phases)?;
     }
-    Ok(PoseSearch {
-        pose,
-        rivals,
-        axes,
-        starts,
-        chosen,
-        symmetric,
-    })
+    Ok(pose)
 }

@@ -20,9 +20,9 @@ pub(super) fn ranks_above(a: &StartReport, b: &StartReport, o: &OrientationSetti
     }
 }
 
-/// Whether two starts rendered alike: colours that tie (an angle of 2 deg,
-/// a cap's in the studio, moved by 1e-3 of itself between its turns: the
-/// facets again) and relative errors the same to `OrientationSettings::same_render`.
+/// Whether two starts rendered alike: colours that tie (between two turns of
+/// a probe of one colour only its facets move the angle, by a small fraction
+/// of itself) and relative errors the same to `OrientationSettings::same_render`.
 pub(super) fn renders_alike(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
     (a.rgb_angle_deg - b.rgb_angle_deg).abs() <= o.rank_tie_deg
         && (a.relative_error - b.relative_error).abs() <= o.same_render * a.relative_error.max(b.relative_error)
@@ -51,13 +51,8 @@ pub(super) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], wei
 /// of them when none does): a probe's turns show one outline when it is of
 /// revolution, and the kept axes fit within that ratio; a mug's handle
 /// shows its turn in the outline, which a coarse map's colours can
-/// contradict (a plain steel mug with its handle at mid-height, upright in
-/// the studio: its true turn's outline fit 8 times better than the
-/// upside-down turn colour ranked first). On 12 photos of a steel mug with
-/// its handle above the middle, plain or banded, with the axis of
-/// revolution and one fit per axis: 0 then 2 poses found, errors 11.60 /
-/// 7.35 / 9.09 -> 8.43 / 4.13 / 4.61 deg; the suite's maps are the same,
-/// byte for byte.
+/// contradict (its true turn's outline can fit several times better than
+/// the turn colour ranks first).
 pub(super) fn best_ranked(
     starts: &[StartReport],
     among: impl IntoIterator<Item = usize>,
@@ -85,11 +80,9 @@ pub(super) fn best_ranked(
 /// start at the other end of the probe (its axis the other way) and the
 /// best-ranked half a turn away about the same axis, each if it ranked
 /// within the margin. Each kind's best, not only the better of the two: a
-/// mask a pixel off turns how a probe's starts rank (the upright studio
-/// cap's mask a pixel too wide ranked a half turn of the wrong end above
-/// the right end, whose map then scored 1.65 dB higher), and a small probe
-/// refined by the photo had an end and a half turn both rank close, the
-/// better ranked the wrong end's half turn.
+/// mask a pixel off turns how a probe's starts rank (a half turn of the
+/// wrong end can rank above the right end, which the photo then scores
+/// higher), and a small probe's end and half turn can both rank close.
 pub(super) fn rival_starts(
     starts: &[StartReport],
     candidates: &[Pose],

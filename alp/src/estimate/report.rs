@@ -59,7 +59,7 @@ pub struct Report {
     /// solve, set by `min_roughness`.
     pub working_resolution: (usize, usize),
     /// The pose searches' map resolution: the working one, at most
-    /// [`SEARCH_HEIGHT`] rows.
+    /// `LightingSettings::search_height` rows.
     pub search_resolution: (usize, usize),
     /// The smallest roughness of the probe, which set it.
     pub min_roughness: f32,

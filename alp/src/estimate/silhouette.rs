@@ -246,17 +246,9 @@ pub(super) fn refit_silhouette(
 /// many iterations as a start's fit, from where it ended, in smaller and
 /// smaller steps ([`PoseSteps::Polish`]), its turn about the axis kept
 /// (`hypotheses::on_axis_of`: colour chose it). The fits of the starts stop
-/// short where the outline tells a turn of the axis weakly: a can seen
-/// nearly end on (half the roughness of the suite's, tilted, in a Mitsuba
-/// twin of the sunset) was left 0.4 deg off across the lean at 57 % more
-/// silhouette loss than its true pose has; polished, 0.09 deg off (mirror
-/// error 8.64 -> 3.61 deg). On the suite's 18 Mitsuba twins at default
-/// quality: 4.11 / 0.90 / 0.60 -> 3.90 / 0.82 / 0.55 deg mirror / shiny /
-/// diffuse, 17 -> 18 poses found (the lying studio can's two halves,
-/// which had tied in the rival test, now score 1.5 to 2.5 dB apart, the
-/// right one higher, at photo seeds 0 to 3); at fast quality 5.95 / 1.59
-/// / 1.16 -> 5.67 / 1.34 / 0.97 deg. It costs a start's fit (about 0.2 s
-/// at default quality; the rival's alongside).
+/// short where the outline tells a turn of the axis weakly (a can seen
+/// nearly end on), and a sharp probe's reflections show such an error. It
+/// costs about a start's fit; see docs/results.md, The polish.
 pub(super) fn polish_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings) -> Result<(Pose, PhaseReport)> {
     let progress = ctx.outline.progress..ctx.outline.progress;
     let iters = (settings.outline.iters, PoseSteps::Polish);
@@ -396,7 +388,8 @@ mod tests {
         let (polished, report) = polish_silhouette(&ctx, start, &settings).expect("a polish");
         assert_eq!(report.name, "silhouette_polish");
         let off = |p: &Pose| axis(p).angle_between(axis(&truth)).to_degrees();
-        // 1 -> 0.06 deg (the same iterations at a start's full steps: 0.11).
+        // The polish ends about 0.06 of the start's offset; the same iterations
+        // at a start's full steps about 0.11, which this bound rejects.
         assert!(
             off(&polished) < 0.1 * off(&start),
             "axis {} -> {} deg off",

@@ -184,12 +184,9 @@ pub fn turns_show(mesh: &Mesh, s: &SymmetrySettings) -> bool {
 /// can's label. None where the asset cannot tell: no single axis (a sphere,
 /// of revolution about every line through its centre), or facets that do
 /// not sample the circles (a scan's irregular mesh). Comparing two turns'
-/// renders tells it only where the mesh's facets come back at that turn
-/// (45 deg for the suite's 64-sided caps: at 30 deg, best quality's first
-/// two turns, the facets made the renders of 7 of its 9 caps differ by
-/// more than `renders_alike` allows: relative errors up to 1.5e-3 apart
-/// against 1e-4, or RGB angles 0.034 deg against 0.02; ranked as
-/// patterned, 2 upright caps came out end for end).
+/// renders tells it only where the mesh's facets come back at that turn (a
+/// 64-sided cap's at 45 deg, not at 30): elsewhere the facets alone make
+/// the renders differ by more than `renders_alike` allows.
 pub fn looks_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bool> {
     let revolution = axis_of_revolution(&asset.mesh, s)?;
     if revolution.share < s.wholly_revolved {
@@ -387,7 +384,7 @@ mod tests {
                 .collect(),
             ..sphere.clone()
         };
-        // Built along +Y: left as it is (the suite's outputs stay as they were).
+        // Built along +Y: left as it is (no turn, so their estimates stay as they were).
         for mesh in [&can, &cap, &disc] {
             assert_eq!(axis_to_y(mesh, &s()), Quat::IDENTITY);
         }

@@ -23,9 +23,8 @@
 //! SoftRas proper takes the union over every triangle within reach, `1 - prod_j (1 - D_j)`: two
 //! front triangles sharing an edge give a pixel centred on it 0.75, and the thin foreshortened
 //! triangles crowding along the limb of a curved object lift the coverage on the silhouette
-//! above one half; mask fits from the true pose of the 18 scenes of the evaluation suite shrank
-//! the probe by 0.14-0.9 % (mean 0.36 %); with the distance to the edge they stay within 0.21 %
-//! either way (mean 0.02 % small).
+//! above one half, and mask fits shrink the probe; with the distance to the edge the coverage
+//! is one half on it and they do not (see docs/results.md, Silhouette losses).
 //!
 //! ```no_run
 //! use autodiff::Tape;

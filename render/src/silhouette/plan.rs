@@ -13,7 +13,7 @@ use crate::mesh::{EdgeAdjacency, Mesh};
 /// degenerate: neither front nor back.
 const MIN_PROJECTED_AREA: f32 = 1e-6;
 /// Cells of the front-triangle grid are this many triangles across (they tile the silhouette);
-/// the suite's procedural probes (4-6k triangles) get the largest cells (sizes below).
+/// the procedural probes (4-6k triangles) get the largest cells (sizes below).
 const TRIANGLES_ACROSS_CELL: f32 = 2.0;
 /// Cells of the rim's and the contour edges' grids are this many items across (they line the
 /// silhouette's edge).
@@ -223,7 +223,7 @@ impl SilhouettePlan {
             // silhouette's edge either way, so that coverage is one half on
             // it. (SoftRas's union over every triangle within reach lifted
             // it on the limb, where thin foreshortened triangles crowd, and
-            // mask fits shrank the probe by 0.14-0.9 %.)
+            // mask fits shrank the probe.)
             let nearest = if covered[pixel as usize] {
                 nearest_outline(p).map(|(feature, _)| (feature, inv_sigma))
             } else {

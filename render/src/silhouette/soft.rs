@@ -170,7 +170,7 @@ impl<'p, 't, T: Real> SoftMask<'p, 't, T> {
         // Rendered coverage is charged its distance to the reference's edge,
         // half a pixel short of the nearest mask pixel's centre: charged the
         // centre distance, a pixel just outside cost twice what a missed one
-        // just inside does, and the fit shrank the probe (0.8 % in scale).
+        // just inside does, and the fit shrank the probe.
         let distance: Vec<f32> = reference
             .distance()
             .iter()

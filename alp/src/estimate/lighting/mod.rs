@@ -41,15 +41,8 @@ pub(super) enum LightingPurpose {
     /// which a mirror shows; a highlight's by its energy, which shades
     /// diffuse and shiny objects: purely relative weights let a bright
     /// light's energy go), and smoothness relative to the local radiance
-    /// level. At the true pose of six scenes (16 spp, 64x32, smoothness
-    /// 1e-3): 7.57 / 2.09 / 1.91 deg mirror / shiny / diffuse, against
-    /// 7.84 / 3.71 / 5.70 with relative weights and plain smoothness 1e-4
-    /// (the earlier default). Where the weights turn absolute trades the
-    /// mirror against the others: at the true pose of the suite's 18
-    /// Mitsuba twins (pilot, MIS, smoothness 3e-4), 4.30 / 0.78 / 0.55 at
-    /// the mean level, 4.77 / 1.31 / 1.49 at 3 times it, 5.55 / 0.70 / 0.41
-    /// at 0.3 times it (and blending the two maps' colours by luminance
-    /// stays on that trade: 4.38 / 0.76 / 0.48).
+    /// level. Where the weights turn absolute trades the mirror against the
+    /// other spheres; see docs/results.md, Lighting solve.
     Output,
 }
 
@@ -368,11 +361,8 @@ pub(super) fn pixel_targets(
 /// `LightingSettings::edge_contrast`): a pose off by a fraction of a pixel puts the photo's
 /// edge elsewhere, and the output map would take the probe's colours in (a
 /// label's red in the sky). An edge of a shadow is none: it moves with the pose smoothly, as
-/// the shading does. (Counted as edges, the pixels along the probe's own
-/// shadows were left out, and with them the sky only they see: the suite's
-/// tilted courtyard can, path-traced by Mitsuba, at its true pose scored
-/// 6.93 / 6.06 / 8.50 deg mirror / shiny / diffuse, against 6.46 / 0.99 /
-/// 0.99.) `row` maps image pixels to `hits.pixels`.
+/// the shading does, and counting it would leave out the sky that only the
+/// pixels along the probe's own shadows see. `row` maps image pixels to `hits.pixels`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn albedo_edges(
     hits: &PrimaryHits,
@@ -418,17 +408,11 @@ pub(super) fn albedo_edges(
 /// Per pixel, the shares of its BRDF samples that reach the env map (the
 /// env map's samples, with MIS, go where its light is, not where the lobe
 /// is). Where the probe shadows a pixel's lobe it reflects light into it
-/// instead; the model follows one bounce of it, not more (the Mitsuba
-/// twins have two). The output map's data term weighs each pixel by the
+/// instead; the model follows one bounce of it, not more (a photo has
+/// more). The output map's data term weighs each pixel by the
 /// square of the share the model follows to the env map (`followed`):
 /// light that stops on the probe is left out, and such samples carry no
-/// signal either, only noise. At the true pose of the suite's 18 scenes
-/// path-traced by Mitsuba: without the bounce and weighing by `direct`,
-/// 5.45 / 1.21 / 0.98 -> 5.26 / 1.11 / 0.93 deg mirror / shiny / diffuse;
-/// with the bounce, 5.22 / 1.09 / 0.92 unweighted, 5.27 / 1.09 / 0.91
-/// weighed by `direct`, 5.15 / 1.04 / 0.90 by `followed` (the upright
-/// courtyard cap's diffuse 0.60, 0.12, 0.15: its deep recess is where the
-/// second bounce counts).
+/// signal either, only noise. See docs/results.md, Lighting solve.
 pub(super) struct LitShares {
     /// Of the pixel's direct samples, the share that reaches the map.
     pub(super) direct: Vec<f64>,
@@ -526,15 +510,8 @@ pub(super) fn output_map(texels: &[f64], work: (usize, usize), out: (usize, usiz
 /// the narrowest reflected lobe (the half-vector spread alpha = r^2 radians
 /// doubles on reflection: texels alpha wide), as a power of two in
 /// 16..=128 (a can, r = 0.2, gets 64 rows; a probe sharper than r = 0.186,
-/// 128). At the true pose of six scenes (can, r = 0.2: 64 rows rather than
-/// 32; final solve at 64 spp), 7.51 / 1.39 / 0.87 deg mirror / shiny /
-/// diffuse against 7.64 / 1.74 / 1.14. Sharp probes' Mitsuba twins at the
-/// true pose (default quality: pilot at [`SEARCH_HEIGHT`] rows), 128 rows
-/// against 64: chrome balls (3 scenes each) of r = 0.05 1.09 / 0.30 / 0.13
-/// against 1.56 / 0.40 / 0.26, r = 0.1 1.53 / 0.32 / 0.13 against 1.81 /
-/// 0.34 / 0.23, r = 0.15 1.84 / 0.32 / 0.04 against 2.04 / 0.29 / 0.08;
-/// the can with half its roughness (6 scenes) 2.80 / 0.87 / 0.38 against
-/// 2.99 / 0.97 / 0.39.
+/// 128). Finer texels than the lobe resolves only add unknowns the data
+/// cannot tell apart; see docs/results.md, Working resolution.
 pub fn working_height(min_roughness: f32) -> usize {
     let alpha = (min_roughness * min_roughness).max(0.02);
     let rows = std::f32::consts::PI / alpha;

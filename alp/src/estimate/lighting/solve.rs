@@ -66,11 +66,7 @@ pub(super) const DARK_LEVEL: f64 = 0.05;
 /// start's local level (grey): no direction of a scene is black,
 /// and a texel the data drive to zero has no colour, which a mirror shows
 /// 90 degrees off (the dark ring a solve leaves around a light sharper
-/// than the probe's lobes resolve). At the true pose of the suite's 18
-/// Mitsuba twins (the estimate's output map: pilot, MIS, smoothness 3e-4):
-/// 4.67 / 0.79 / 0.55 -> 4.30 / 0.78 / 0.55 deg mirror / shiny / diffuse;
-/// with a coarse-to-fine final solve at smoothness 1e-3, 4.58 -> 4.46 in
-/// mirror at 2 % and 4.45 at 5 %.
+/// than the probe's lobes resolve).
 pub const FLOOR_OF_LEVEL: f64 = 0.02;
 
 /// Solves `min_x>=0 sum_p w_p |A x - b_p|^2 / sum w + lambda R(x)` where
