@@ -1030,7 +1030,7 @@ const SILHOUETTE_SPP_FACTOR: u32 = 4;
 /// samples see the probe). Light is sampled by MIS of the BRDF and the env
 /// map ([`LightSampling::mis`]), and what the probe reflects onto itself
 /// by one bounce ([`LightSampling::interreflection`]); silhouette pixels get
-/// [`SILHOUETTE_SPP_FACTOR`] times the samples ([`PrimaryHits::trace_refined`]).
+/// `SILHOUETTE_SPP_FACTOR` times the samples ([`PrimaryHits::trace_refined`]).
 /// High sample counts run in passes of at most 16 spp (seeds `seed`,
 /// `seed + 2^32`, ...), averaged, so memory stays bounded.
 pub fn render_image(

@@ -61,7 +61,7 @@ pub const MAX_TEXELS: usize = 1 << 16;
 /// matrix stored by pixel: the texels each pixel's light samples read
 /// (bilinear taps of every sample merged, so that more samples per pixel
 /// cost memory only where lobes are wide), their weights quantised.
-/// Products with its transpose sum per chunk of [`PIXEL_CHUNK`] pixels
+/// Products with its transpose sum per chunk of `PIXEL_CHUNK` pixels
 /// into a dense map (the map is small next to the transport: no
 /// transposed copy), the chunks in order: parallel, and the same sums
 /// whatever the thread count.
@@ -361,10 +361,10 @@ impl Transport {
     /// least-squares gradient): one pass over the rows instead of two, each
     /// row still in cache when its residual goes back. The solve's every
     /// iteration needs both, and they are bound by memory traffic, which one
-    /// pass halves. The transposed products sum per chunk of [`PIXEL_CHUNK`]
+    /// pass halves. The transposed products sum per chunk of `PIXEL_CHUNK`
     /// pixels into `scratch` (reused from call to call), the chunks then in
     /// order: the same sums whatever the thread count. Rows, radiances and
-    /// sums go four lanes at a time ([`lanes`]): a whole entry is converted,
+    /// sums go four lanes at a time (`lanes`): a whole entry is converted,
     /// multiplied and added at once, with the same sums as plain arrays.
     pub fn apply_and_pull_back(
         &self,

@@ -114,7 +114,7 @@ impl MaskShape {
 /// the view ray both ways (a probe seen end-on); for a mask the image's
 /// border cuts, all of these, along both of its directions. Upright is both ways too
 /// unless `top_known` (mesh +Y is the probe's top, as a probe standing on
-/// its -Y end is built; not so for one whose axis [`axis_to_y`] turned to
+/// its -Y end is built; not so for one whose axis [`axis_to_y`](super::symmetry::axis_to_y) turned to
 /// +Y, whose ends are anyone's guess). Hypotheses within `HypothesisSettings::same_axis_deg`
 /// (15) degrees of an earlier one are left out.
 pub fn axis_hypotheses(
@@ -265,7 +265,7 @@ pub(super) fn lean_frame(pose: &Pose, mesh: &Mesh, camera: &Camera) -> (Vec3, Ve
 }
 
 /// `pose` leaned by `deg` towards the camera's view ray (see
-/// [`lean_frame`]) about the centre of its bounding box: the turn of the
+/// `lean_frame`) about the centre of its bounding box: the turn of the
 /// axis that the outline tells least.
 pub fn leaned(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
     let (_, _, tip) = lean_frame(pose, mesh, camera);
@@ -273,7 +273,7 @@ pub fn leaned(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {
 }
 
 /// `pose` with its axis swayed by `deg` across the view (towards the lean
-/// frame's `axis x view`, see [`lean_frame`]) about the centre of its
+/// frame's `axis x view`, see `lean_frame`) about the centre of its
 /// bounding box: square to the lean, the axis turns in the image's plane
 /// and keeps its angle to the view ray.
 pub fn swayed(pose: &Pose, mesh: &Mesh, camera: &Camera, deg: f32) -> Pose {

@@ -38,7 +38,7 @@ pub struct Report {
     /// The test of the chosen pose against its rival (none without one):
     /// a probe symmetric about its axis whose other end's outline fits
     /// nearly as well, or one with a pattern whose best other end or best
-    /// half turn ranked close ([`RIVAL_RANK_DEG`]; of two such, the one
+    /// half turn ranked close (`OrientationSettings::rival_rank_deg`; of two such, the one
     /// that scored higher). The phases `lighting_rival` carry every pose
     /// judged.
     pub rival: Option<RivalReport>,
@@ -70,7 +70,7 @@ pub struct Report {
     pub probe_axis: [f32; 3],
     /// Mask pixels on the photo's border: the probe may go on beyond it
     /// (the start and the axis hypotheses allow for that:
-    /// [`hypotheses::initial_pose`], [`hypotheses::axis_hypotheses`]), and what lies
+    /// [`initial_pose`](super::hypotheses::initial_pose), [`axis_hypotheses`](super::hypotheses::axis_hypotheses)), and what lies
     /// beyond is unseen.
     pub mask_on_border_pixels: usize,
     /// The photo as the estimate worked on it.
@@ -79,7 +79,7 @@ pub struct Report {
     pub clipped_pixels: usize,
     /// Samples per pixel of the final lighting solve: the settings', or
     /// fewer for a probe so large in the photo that they would overrun
-    /// [`FINAL_SAMPLE_BUDGET`].
+    /// `LightingSettings::final_sample_budget`.
     pub final_spp: u32,
     /// Every phase, in order.
     pub phases: Vec<PhaseReport>,
@@ -90,7 +90,7 @@ pub struct Report {
 }
 
 /// The photo as the estimate worked on it (see
-/// [`Settings::working_mask_pixels`]).
+/// `PhotoSettings::working_mask_pixels`).
 #[derive(Clone, Debug, Serialize)]
 pub struct WorkingImage {
     /// The box filter's factor (1: the photo as it is).
@@ -225,7 +225,7 @@ pub struct LineSearchReport {
     pub kept: f32,
 }
 
-/// One line search of the photo's refinement ([`refine_by_photo`]).
+/// One line search of the photo's refinement (`PhotoJudge::refine`).
 #[derive(Clone, Debug, Serialize)]
 pub struct RefinementStep {
     /// The pose refined: "chosen" or "rival".

@@ -1,13 +1,13 @@
 //! The lighting stage at a fixed pose. The rendered image is linear in the
 //! environment map: light samples traced once at the pose record which
-//! texels each pixel reads with which weight ([`transport`]), and the map is
-//! the regularised, non-negative least-squares solution ([`solve`]), coarse
-//! to fine. What the fit is for sets the pixels' weights
-//! ([`LightingPurpose`]); the output map's fit leaves out pixels on the
+//! texels each pixel reads with which weight ([`render::transport`]), and the
+//! map is the regularised, non-negative least-squares solution
+//! ([`least_squares`]), coarse to fine. What the fit is for sets the pixels'
+//! weights (`LightingPurpose`); the output map's fit leaves out pixels on the
 //! probe's reflectance edges and weighs each by the share of its light the
 //! model follows.
 
-pub mod solve;
+pub mod least_squares;
 
 use std::time::Instant;
 
@@ -19,8 +19,8 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
+pub use least_squares::{LightingSolve, Smoothness, Solved, pyramid, solve};
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
-pub use solve::{LightingSolve, Smoothness, Solved, pyramid, solve};
 
 use super::Probe;
 use super::photo::{Photo, Pixels, usable_pixel};
