@@ -32,7 +32,7 @@
 mod plan;
 mod tiles;
 
-use crate::ops::{concat, custom, slice};
+use crate::ops::{add_into, concat, custom, slice};
 use crate::real::Real;
 use crate::tape::{Graph, NONE, Node, NonFinite, Op};
 use plan::{Instr, Region};
@@ -323,19 +323,34 @@ impl<T: Real> Graph<T> {
             }
             Op::Custom(c) => {
                 let vals = &self.values.bufs;
-                let inputs = (0..num).map(|k| {
+                // An input listed again (`custom(op, &[x, x])`) gets a zeroed
+                // slot of its own, added into its first listing's after the op.
+                let first_listing = |k: usize| (0..k).find(|&j| self.edges[first + j] == self.edges[first + k]);
+                let mut again: Vec<Vec<T>> = (0..num)
+                    .map(|k| match first_listing(k).and_then(|_| input_grad(&mut adj, k)) {
+                        Some(g) => vec![T::zero(); g.len],
+                        None => Vec::new(),
+                    })
+                    .collect();
+                let inputs = again.iter_mut().enumerate().map(|(k, again)| {
                     let i = &self.nodes[self.edges[first + k] as usize];
                     // SAFETY: distinct inputs have distinct adjoint buffers; an
-                    // input repeated in the list gets its gradient slot once.
-                    let repeated = (0..k).any(|j| self.edges[first + j] == self.edges[first + k]);
-                    let g = if repeated { None } else { input_grad(&mut adj, k) };
-                    (
-                        &vals[i.value as usize][..i.len as usize],
-                        g.map(|g| unsafe { g.slice(0, i.len as usize) }),
-                    )
+                    // input listed again writes into its own zeroed slot.
+                    let g = match first_listing(k) {
+                        Some(_) => (!again.is_empty()).then_some(&mut again[..]),
+                        None => input_grad(&mut adj, k).map(|g| unsafe { g.slice(0, i.len as usize) }),
+                    };
+                    (&vals[i.value as usize][..i.len as usize], g)
                 });
                 let y = &vals[n.value as usize][..n.len as usize];
                 custom::backward(&*self.customs[c as usize], inputs, y, gy);
+                for (k, again) in again.iter().enumerate() {
+                    if let (Some(j), Some(g)) = (first_listing(k), input_grad(&mut adj, k)) {
+                        debug_assert!(first_listing(j).is_none());
+                        // SAFETY: the op is done; `g` is the only reference to that buffer.
+                        add_into(unsafe { g.slice(0, g.len) }, again);
+                    }
+                }
             }
             _ => unreachable!("only plain ops run as plain steps"),
         }

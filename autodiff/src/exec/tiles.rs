@@ -303,12 +303,12 @@ impl<T: Real> Executor<T> {
     /// in chunk order.
     fn reduce_chunks(&mut self, reg: &Region, pass: Pass, threads: usize) {
         for (s, &(target, scatter)) in self.shared[reg.shared.clone()].iter().enumerate() {
-            let dst = if pass.backward() {
-                self.adjs[target as usize]
-            } else {
-                self.vals[target as usize]
+            // A scatter-add's privates hold values (its forward), the rest
+            // gradients (the backward): a fused pass reduces both.
+            let (dst, wanted) = match scatter {
+                true => (self.vals[target as usize], pass.forward_sinks()),
+                false => (self.adjs[target as usize], pass.backward()),
             };
-            let wanted = if scatter { pass.forward_sinks() } else { pass.backward() };
             if dst.ptr.is_null() || !wanted {
                 continue;
             }

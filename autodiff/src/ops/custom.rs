@@ -153,4 +153,43 @@ mod tests {
             assert!(r.worst_rel_error < TOL, "custom: {r}");
         }
     }
+
+    /// `y[i] = a[i] b[i]` for inputs `(a, b)`.
+    struct Product;
+
+    impl<T: Real> CustomOp<T> for Product {
+        fn name(&self) -> &str {
+            "product"
+        }
+
+        fn output_len(&self, input_lens: &[usize]) -> usize {
+            input_lens[0]
+        }
+
+        fn forward(&self, inputs: &[&[T]], output: &mut [T]) {
+            for (i, y) in output.iter_mut().enumerate() {
+                *y = inputs[0][i] * inputs[1][i];
+            }
+        }
+
+        fn vjp(&self, inputs: &[&[T]], _output: &[T], grad_output: &[T], grad_inputs: &mut [Option<&mut [T]>]) {
+            for k in 0..2 {
+                if let Some(g) = grad_inputs[k].as_deref_mut() {
+                    for (i, &gy) in grad_output.iter().enumerate() {
+                        g[i] += gy * inputs[1 - k][i];
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn an_input_listed_twice_gets_both_its_gradients() {
+        // `product(x, x)` is x^2: both listings' products reach x.
+        let r = gradcheck(&[Input::Var(uniform(5, 0.5, 1.5, 3))], |t, x| {
+            let op: Arc<dyn CustomOp<f64>> = Arc::new(Product);
+            t.custom(op, &[x[0], x[0]]).sin()
+        });
+        assert!(r.worst_rel_error < TOL, "custom with a repeated input: {r}");
+    }
 }

@@ -83,6 +83,22 @@ mod tests {
     }
 
     #[test]
+    fn a_scatter_add_keeps_every_chunk_s_values_when_backward_runs_its_region() {
+        // Long enough to be cut into chunks on threads; the scatter-add and
+        // the loss end one region, which `backward` runs forward and backward
+        // in one pass.
+        let n = 40_000;
+        let tape = Tape::<f64>::new();
+        let x = tape.leaf(&vec![1.0; n]);
+        let idx = tape.constant(&(0..n).map(|i| (i % 4) as f64).collect::<Vec<_>>());
+        let bins = x.scatter_add(idx, 4);
+        let loss = (x * x).sum();
+        tape.backward(loss);
+        assert_eq!(&*tape.value(bins), &[10_000.0; 4]);
+        assert!(tape.grad(x).iter().all(|&g| g == 2.0));
+    }
+
+    #[test]
     #[should_panic(expected = "scatter_add: index 2 out of range for an array of 2 elements")]
     fn scatter_add_out_of_range_names_the_op() {
         let tape = Tape::<f32>::new();
