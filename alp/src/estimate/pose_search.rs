@@ -203,35 +203,44 @@ impl PhotoJudge<'_> {
     /// with the output's weighting; it guides and starts the later solves.
     fn pilot(&self, pose: &Pose, phases: &mut PhaseLog) -> Result<Vec<f64>> {
         let t1 = Instant::now();
-        let render = RenderSettings {
-            spp: self
-                .settings
-                .lighting
-                .final_spp(self.settings.lighting.spp_pilot, self.photo.mask.count(), 1),
-            seed: self.settings.seed.wrapping_add(78),
-        };
-        let fit = fit_lighting(
-            self.probe,
-            self.photo,
-            self.clipped,
-            pose,
-            &FitRequest {
-                size: self.work,
-                render,
-                sampling: LightSampling::BSDF.with_interreflection(),
-                smoothness: Smoothness::quadratic(self.settings.lighting.smoothness),
-                purpose: LightingPurpose::Output,
-                pixels: Pixels::All,
-                start: None,
-                max_iters: self.settings.lighting.solve_iters,
-            },
-            &self.settings.lighting,
-        )?;
+        let lighting = &self.settings.lighting;
+        let spp = lighting.final_spp(lighting.spp_pilot, self.photo.mask.count(), 1);
+        let sampling = LightSampling::BSDF.with_interreflection();
+        let fit = self.output_fit(pose, (spp, 78), sampling, Pixels::All, None, lighting.solve_iters)?;
         phases.push(PhaseReport {
             pose: Some(PoseRecord::from(pose)),
             ..lighting_report("lighting_pilot", &fit, t1)
         });
         Ok(fit.into_map())
+    }
+
+    /// A fit at `pose` on the searches' map size with the output's weighting
+    /// and the searches' smoothness: `spp` samples per pixel seeded
+    /// `seed_offset` past the settings' seed.
+    fn output_fit(
+        &self,
+        pose: &Pose,
+        (spp, seed_offset): (u32, u64),
+        sampling: LightSampling,
+        pixels: Pixels,
+        start: Option<&[f64]>,
+        max_iters: usize,
+    ) -> Result<LightingFit> {
+        let lighting = &self.settings.lighting;
+        let request = FitRequest {
+            size: self.work,
+            render: RenderSettings {
+                spp,
+                seed: self.settings.seed.wrapping_add(seed_offset),
+            },
+            sampling,
+            smoothness: Smoothness::quadratic(lighting.smoothness),
+            purpose: LightingPurpose::Output,
+            pixels,
+            start,
+            max_iters,
+        };
+        fit_lighting(self.probe, self.photo, self.clipped, pose, &request, lighting)
     }
 
     /// A line search over one parameter of the kept pose (`candidate(pose,
@@ -345,33 +354,17 @@ impl PhotoJudge<'_> {
     /// minus infinity with no data pixel left): the weighted error, not the
     /// PSNR, which a sun's highlight dominates.
     pub(super) fn score(&self, pose: &Pose, start: &[f64], pixels: Pixels) -> Result<(LightingFit, f64)> {
-        let (settings, work) = (self.settings, self.work);
+        let (lighting, work) = (&self.settings.lighting, self.work);
         let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
         let sampling = LightSampling::mis(&sampler).with_interreflection();
-        let render = RenderSettings {
-            spp: settings.lighting.final_spp(
-                settings.lighting.spp_lean,
-                self.photo.mask.count(),
-                sampling.strategies(),
-            ),
-            seed: settings.seed.wrapping_add(79),
-        };
-        let fit = fit_lighting(
-            self.probe,
-            self.photo,
-            self.clipped,
+        let spp = lighting.final_spp(lighting.spp_lean, self.photo.mask.count(), sampling.strategies());
+        let fit = self.output_fit(
             pose,
-            &FitRequest {
-                size: work,
-                render,
-                sampling,
-                smoothness: Smoothness::quadratic(settings.lighting.smoothness),
-                purpose: LightingPurpose::Output,
-                pixels,
-                start: Some(start),
-                max_iters: settings.lighting.lean_solve_iters,
-            },
-            &self.settings.lighting,
+            (spp, 79),
+            sampling,
+            pixels,
+            Some(start),
+            lighting.lean_solve_iters,
         )?;
         let score = match fit.weighted_sq_error() {
             error if error > 0.0 => -10.0 * error.log10(),

@@ -217,29 +217,11 @@ pub(super) fn fit_lighting(
     let camera = &photo.camera;
     let keep = |p: u32| pixels.keeps(p, camera.width);
     let record = SampleRecord::trace(probe.asset, pose, camera, settings, sampling, passes, keep)?;
-    let SampleRecord {
-        hits,
-        row,
-        segment,
-        uv,
-        throughput,
-        direct,
-        lit,
-        env_sampled,
-    } = record;
-    let (target, mut weight) = pixel_targets(photo, &hits, clipped, purpose)?;
+    let (target, mut weight) = pixel_targets(photo, &record.hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
-        let shares = LitShares::new(&segment, &direct, &lit, &env_sampled, hits.pixels.len());
-        let edges = albedo_edges(
-            &hits,
-            &row,
-            &segment,
-            &throughput,
-            &direct,
-            &shares.direct,
-            pixels,
-            lighting,
-        );
+        let r = &record;
+        let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());
+        let edges = albedo_edges(r, &shares.direct, pixels, lighting);
         weight
             .iter_mut()
             .zip(&edges)
@@ -256,7 +238,7 @@ pub(super) fn fit_lighting(
         },
         max_iters,
     };
-    let at = |(w, h): (usize, usize)| Transport::new(&segment, &uv, &throughput, hits.pixels.len(), w, h);
+    let at = |(w, h): (usize, usize)| record.transport(w, h);
     let (transport, solved) = match start {
         Some(x0) => {
             let transport = at(size);
@@ -308,10 +290,10 @@ pub(super) fn fit_lighting(
         evaluations,
         termination,
     } = solved;
-    let mut rendered = vec![[0.0; 3]; hits.pixels.len()];
+    let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];
     transport.apply(&env, &mut rendered);
     Ok(LightingFit {
-        hits,
+        hits: record.hits,
         transport,
         env,
         rendered,
@@ -362,18 +344,22 @@ pub(super) fn pixel_targets(
 /// edge elsewhere, and the output map would take the probe's colours in (a
 /// label's red in the sky). An edge of a shadow is none: it moves with the pose smoothly, as
 /// the shading does, and counting it would leave out the sky that only the
-/// pixels along the probe's own shadows see. `row` maps image pixels to `hits.pixels`.
-#[allow(clippy::too_many_arguments)]
+/// pixels along the probe's own shadows see. `lit` is each pixel's share of
+/// direct samples that reach the map.
 pub(super) fn albedo_edges(
-    hits: &PrimaryHits,
-    row: &[u32],
-    segment: &[u32],
-    throughput: &[[f32; 3]],
-    direct: &[bool],
+    record: &SampleRecord,
     lit: &[f64],
     pixels: Pixels,
     lighting: &LightingSettings,
 ) -> Vec<bool> {
+    let SampleRecord {
+        hits,
+        row,
+        segment,
+        throughput,
+        direct,
+        ..
+    } = record;
     let mut albedo = vec![[0.0f64; 3]; hits.pixels.len()];
     for ((&s, t), d) in segment.iter().zip(throughput).zip(direct) {
         if *d {
