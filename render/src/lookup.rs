@@ -226,6 +226,7 @@ impl<'t, T: Real> TextureVars<'t, T> {
 /// coordinates `uv` (FORMATS.md: texel centres at +0.5, wrap in u, clamp in
 /// v), without a tape: what [`ImageVars::env_radiance`] reads, for the light
 /// transport.
+#[inline]
 pub fn env_taps(uv: Vec2, width: usize, height: usize) -> ([u32; 4], [f32; 4]) {
     let x = uv.x * width as f32 - 0.5;
     let y = (uv.y * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);

@@ -37,17 +37,20 @@ pub(crate) struct Entry {
 }
 
 impl Entry {
+    #[inline]
     pub(crate) fn new(index: u16, weight: [u16; 3]) -> Self {
         Entry {
             lanes: [weight[0], weight[1], weight[2], index],
         }
     }
 
+    #[inline]
     pub(crate) fn index(&self) -> usize {
         self.lanes[3] as usize
     }
 
     /// The RGB weight in quanta.
+    #[inline]
     pub(crate) fn quanta(&self) -> [f64; 3] {
         std::array::from_fn(|c| self.lanes[c] as f64)
     }
@@ -205,6 +208,7 @@ impl SampleRecord {
 pub(crate) const PIXEL_CHUNK: usize = 2048;
 
 /// The pixels of chunk `chunk` of `pixels`.
+#[inline]
 pub(crate) fn pixel_chunk(chunk: usize, pixels: usize) -> std::ops::Range<usize> {
     chunk * PIXEL_CHUNK..((chunk + 1) * PIXEL_CHUNK).min(pixels)
 }
@@ -325,6 +329,7 @@ impl Transport {
     }
 
     /// The entries of pixel `p`'s row.
+    #[inline]
     pub(crate) fn row(&self, p: usize) -> &[Entry] {
         &self.rows[self.row_start[p]..self.row_start[p + 1]]
     }
@@ -332,6 +337,7 @@ impl Transport {
     /// Pixel `p`'s radiance under `env` (RGB and a 0 per texel: see
     /// [`lanes`]). Two sums, of the even and the odd entries: one would
     /// chain every multiply-add of the row on the one before.
+    #[inline]
     pub(crate) fn render_pixel(&self, p: usize, env: &[[f64; 4]]) -> [f64; 3] {
         let (mut even, mut odd) = (F64x4::ZERO, F64x4::ZERO);
         let mut pairs = self.row(p).chunks_exact(2);
@@ -453,6 +459,7 @@ pub struct PullBackScratch {
 }
 
 /// A texel-major RGB map as four lanes per texel, the fourth 0.
+#[inline]
 pub(crate) fn padded(env: &[f64]) -> impl Iterator<Item = [f64; 4]> + '_ {
     env.as_chunks::<3>().0.iter().map(|t| [t[0], t[1], t[2], 0.0])
 }
@@ -499,22 +506,26 @@ mod lanes {
             // SAFETY: an __m256d is four f64s, any bits valid.
             pub const ZERO: F64x4 = F64x4(unsafe { std::mem::transmute::<[f64; 4], __m256d>([0.0; 4]) });
 
+            #[inline]
             pub fn from_entry(e: &Entry) -> Self {
                 // SAFETY: an entry is 8 bytes: one 64-bit load; the build
                 // enables AVX2 (and so SSE4.1), which this module's cfg requires.
                 F64x4(unsafe { _mm256_cvtepi32_pd(_mm_cvtepu16_epi32(_mm_loadl_epi64(e.lanes.as_ptr().cast()))) })
             }
 
+            #[inline]
             pub fn load(a: &[f64; 4]) -> Self {
                 // SAFETY: four f64s.
                 F64x4(unsafe { _mm256_loadu_pd(a.as_ptr()) })
             }
 
+            #[inline]
             pub fn store(self, a: &mut [f64; 4]) {
                 // SAFETY: four f64s.
                 unsafe { _mm256_storeu_pd(a.as_mut_ptr(), self.0) }
             }
 
+            #[inline]
             pub fn to_array(self) -> [f64; 4] {
                 let mut a = [0.0; 4];
                 self.store(&mut a);
@@ -524,6 +535,7 @@ mod lanes {
 
         impl std::ops::Add for F64x4 {
             type Output = Self;
+            #[inline]
             fn add(self, o: Self) -> Self {
                 // SAFETY: the build enables AVX (this module's cfg).
                 F64x4(unsafe { _mm256_add_pd(self.0, o.0) })
@@ -532,6 +544,7 @@ mod lanes {
 
         impl std::ops::Mul for F64x4 {
             type Output = Self;
+            #[inline]
             fn mul(self, o: Self) -> Self {
                 // SAFETY: the build enables AVX (this module's cfg).
                 F64x4(unsafe { _mm256_mul_pd(self.0, o.0) })
@@ -549,18 +562,22 @@ mod lanes {
         impl F64x4 {
             pub const ZERO: F64x4 = F64x4([0.0; 4]);
 
+            #[inline]
             pub fn from_entry(e: &Entry) -> Self {
                 F64x4(e.lanes.map(|q| q as f64))
             }
 
+            #[inline]
             pub fn load(a: &[f64; 4]) -> Self {
                 F64x4(*a)
             }
 
+            #[inline]
             pub fn store(self, a: &mut [f64; 4]) {
                 *a = self.0;
             }
 
+            #[inline]
             pub fn to_array(self) -> [f64; 4] {
                 self.0
             }
@@ -568,6 +585,7 @@ mod lanes {
 
         impl std::ops::Add for F64x4 {
             type Output = Self;
+            #[inline]
             fn add(self, o: Self) -> Self {
                 F64x4(std::array::from_fn(|k| self.0[k] + o.0[k]))
             }
@@ -575,6 +593,7 @@ mod lanes {
 
         impl std::ops::Mul for F64x4 {
             type Output = Self;
+            #[inline]
             fn mul(self, o: Self) -> Self {
                 F64x4(std::array::from_fn(|k| self.0[k] * o.0[k]))
             }
