@@ -37,7 +37,6 @@ use glam::Vec3;
 use render::bsdf::GgxMetal;
 use render::integrator::{RenderSettings, render_image};
 use render::mesh::EdgeAdjacency;
-use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::silhouette::ReferenceMask;
 
@@ -48,8 +47,8 @@ pub use settings::{Quality, Settings};
 
 use settings::SymmetrySettings;
 
-use lighting::{MapSizes, env_from_texels, final_fit, lighting_report, output_map};
-use orientation::search_pose;
+use lighting::{MapSizes, env_from_texels, final_fit, lighting_report};
+use orientation::{PoseSearch, search_pose};
 use pose_search::PhotoJudge;
 use report::{PhaseLog, WorkingImage};
 
@@ -145,20 +144,11 @@ pub fn estimate_with_progress(
     let judged = judge.judge(&mut phases, pose, rivals, patterned)?;
     // The output map.
     let t2 = Instant::now();
-    let (fit, final_spp) = final_fit(
-        &probe,
-        photo,
-        clipped,
-        &judged.pose,
-        judged.pilot.as_deref(),
-        &sizes,
-        settings,
-    )?;
+    let pilot = judged.pilot.as_deref();
+    let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, pilot, &sizes, settings)?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
-    let env = output_map(&fit.env, sizes.work, out_size)?;
-    let confidence: Vec<f64> = fit.transport.confidence().iter().flat_map(|&c| [c as f64; 3]).collect();
-    let confidence = output_map(&confidence, sizes.work, out_size)?;
+    let (env, confidence) = fit.output_maps(sizes.work, out_size)?;
     let rerender = match working.photo {
         None => fit.rerender(),
         // The fit's pixels are blocks of the photo's: the photo's own size
@@ -173,10 +163,7 @@ pub fn estimate_with_progress(
             render_image(asset, &judged.pose, &full.camera, &map, &GgxMetal, &render).0
         }
     };
-    let (axes, starts, chosen_start) = match searched {
-        Some(search) => (search.axes, search.starts, Some(search.chosen)),
-        None => (Vec::new(), Vec::new(), None),
-    };
+    let (axes, starts, chosen_start) = searched.map(PoseSearch::into_accounts).unwrap_or_default();
     let report = Report {
         settings: settings.clone(),
         axes,
@@ -191,11 +178,7 @@ pub fn estimate_with_progress(
         min_roughness: sizes.min_roughness,
         probe_axis: (to_y.inverse() * Vec3::Y).to_array(),
         mask_on_border_pixels: mask_on_border(&full.mask),
-        working_image: WorkingImage {
-            factor: working.factor,
-            size: (photo.mask.width, photo.mask.height),
-            mask_pixels: photo.mask.count(),
-        },
+        working_image: WorkingImage::of(photo, working.factor),
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
         final_spp,
         phases: phases.phases,
@@ -206,10 +189,10 @@ pub fn estimate_with_progress(
         env,
         confidence,
         // A known pose as given; a found one of the mesh as it is.
-        pose: match (settings.known_pose, along_y.is_some()) {
+        pose: match (settings.known_pose, &along_y) {
             (Some(known), _) => known,
-            (None, false) => judged.pose,
-            (None, true) => Pose::new(judged.pose.rotation * to_y, judged.pose.scale, judged.pose.translation),
+            (None, None) => judged.pose,
+            (None, Some(_)) => symmetry::turned_back(&judged.pose, to_y),
         },
         rerender,
         report,
@@ -221,6 +204,7 @@ pub fn estimate_with_progress(
 mod testing {
     use render::camera::Camera;
     use render::envmap::EnvMap;
+    use render::pose::Pose;
 
     use super::*;
 

@@ -46,6 +46,13 @@ pub(super) struct PoseSearch {
     pub(super) symmetric: bool,
 }
 
+impl PoseSearch {
+    /// The accounts the report keeps: every axis, every start, the one chosen.
+    pub(super) fn into_accounts(self) -> (Vec<AxisReport>, Vec<StartReport>, Option<usize>) {
+        (self.axes, self.starts, Some(self.chosen))
+    }
+}
+
 /// A start's refit (if any), ranking phase, account and pose.
 type RankedStart = (Option<PhaseReport>, PhaseReport, StartReport, Pose);
 

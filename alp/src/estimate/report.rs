@@ -7,6 +7,7 @@ use render::image_io::RgbImage;
 use render::pose::Pose;
 use serde::Serialize;
 
+use super::photo::Photo;
 use super::settings::Settings;
 use crate::objective::TermReport;
 
@@ -195,6 +196,17 @@ pub struct StartReport {
     pub relative_error: f64,
     /// Whether the start refines the best yaw (else one of the grid).
     pub refinement: bool,
+}
+
+impl WorkingImage {
+    /// The account of `photo`, box-filtered by `factor`.
+    pub(super) fn of(photo: &Photo, factor: f64) -> Self {
+        WorkingImage {
+            factor,
+            size: (photo.mask.width, photo.mask.height),
+            mask_pixels: photo.mask.count(),
+        }
+    }
 }
 
 /// The test of the search's choice against its rival: the pose searches'

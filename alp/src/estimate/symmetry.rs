@@ -31,6 +31,11 @@ pub fn turned_to_y(pose: &Pose, to_y: Quat) -> Pose {
     Pose::new(pose.rotation * to_y.inverse(), pose.scale, pose.translation)
 }
 
+/// `pose` of the mesh turned by `to_y`, as a pose of the mesh as built.
+pub fn turned_back(pose: &Pose, to_y: Quat) -> Pose {
+    Pose::new(pose.rotation * to_y, pose.scale, pose.translation)
+}
+
 /// The rotation that turns the probe's axis to mesh +Y: the estimate turns
 /// the probe about +Y (its yaw starts) and reads its length along it. The
 /// axis is the probe's axis of revolution ([`axis_of_revolution`]: a mug's

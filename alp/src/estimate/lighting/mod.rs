@@ -79,6 +79,18 @@ impl LightingFit {
         mean_weighted_sq_error(&self.rendered, &self.target, &self.weight)
     }
 
+    /// The solved map and the sampling confidence (grey) at the output
+    /// size `out`, from the working size `work`.
+    pub(super) fn output_maps(&self, work: (usize, usize), out: (usize, usize)) -> Result<(EnvMap, EnvMap)> {
+        let confidence: Vec<f64> = self
+            .transport
+            .confidence()
+            .iter()
+            .flat_map(|&c| [c as f64; 3])
+            .collect();
+        Ok((output_map(&self.env, work, out)?, output_map(&confidence, work, out)?))
+    }
+
     /// The re-render at the photo's size: the fit's pixels, the rest zero.
     pub(super) fn rerender(&self) -> RgbImage {
         let channels: [Vec<f64>; 3] = std::array::from_fn(|c| self.rendered.iter().map(|p| p[c]).collect());
