@@ -117,9 +117,10 @@ pub struct HypothesisSettings {
     /// A mask at most this elongated is round: its axis could point anywhere.
     pub round_mask: f32,
     /// An axis leaning less than this (degrees) towards or away from the
-    /// camera is about its own mirror twin...
+    /// camera is about its own mirror twin: its twins lean `twin_lean_deg`
+    /// either way instead.
     pub upright_lean_deg: f32,
-    /// ...whose twins then lean this far (degrees) either way.
+    /// The lean (degrees) of the twins of an axis that barely leans.
     pub twin_lean_deg: f32,
 }
 
@@ -492,5 +493,40 @@ impl Settings {
             Some(_) => output,
             None => 1 + self.orientation.starts_deg.len() + 2 * self.joint.rounds + output,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_presets_trade_time_for_accuracy_and_the_report_records_every_stage() {
+        for quality in [Quality::Fast, Quality::Default, Quality::Best] {
+            assert_eq!(Settings::new(quality).quality, quality);
+        }
+        let (fast, default, best) = (Settings::fast(), Settings::default(), Settings::best());
+        let starts = |s: &Settings| s.orientation.starts_deg.len();
+        assert!(starts(&fast) < starts(&default) && starts(&default) < starts(&best));
+        assert!(fast.lighting.spp_final < default.lighting.spp_final);
+        assert!(default.lighting.spp_final < best.lighting.spp_final);
+        assert_eq!(fast.pose_search.lean_step_deg, 0.0, "fast quality has no lean search");
+        // The yaw starts spread evenly around the axis.
+        let yaws = &default.orientation.starts_deg;
+        assert!(yaws.windows(2).all(|w| (w[1] - w[0] - 45.0).abs() < 1e-4), "{yaws:?}");
+        let json = serde_json::to_value(&default).expect("settings serialise");
+        for stage in [
+            "photo",
+            "symmetry",
+            "hypotheses",
+            "outline",
+            "orientation",
+            "lighting",
+            "pose_search",
+            "joint",
+        ] {
+            assert!(json[stage].is_object(), "report.json's settings lack `{stage}`");
+        }
+        assert_eq!(json["lighting"]["spp_final"], 128);
     }
 }
