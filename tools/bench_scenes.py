@@ -1,0 +1,220 @@
+"""The development benchmark: a **train** and a **test** split of scene folders (shared/FORMATS.md),
+drawn from fixed seeds and path-traced by Mitsuba 3, for `tools/benchmark.py` to run `alp
+estimate` on. Constants and choices of the estimate are tuned on train only; test is reported.
+
+    python3 tools/bench_scenes.py --out DIR [--train 48] [--test 48] [--spp 512]
+
+makes DIR/train/NNN_<family>_<pose>_<lighting>/ and DIR/test/..., each holding image.exr,
+mask.png, camera.json, pose.json, gt_env.exr, probe.txt ("probe"), the probe folder probe/ and
+scene.json (everything drawn, for the reports). Existing scenes whose scene.json matches the
+draw are kept, so an interrupted run resumes. About 6 s per scene on 2 cores.
+
+Each scene draws, from its own seed:
+- a probe (tools/bench_probes.py): can 35 %, cap 25 %, bottle 15 %, sphere 10 %, ring 15 %;
+  5k to 40k triangles, roughness 0.03 to 0.4 across its regions;
+- its pose: upright (axis within 5 deg of vertical), tilted (15 to 65 deg) or lying (80 to 100
+  deg) in 2 : 1 : 1, any turn about the axis;
+- lighting (tools/bench_lighting.py): a bundled map 40 % (train: courtyard and studio; test:
+  sunset: a map's source stays in one split), a `sunsky` sky 30 %, a room 30 %;
+- a camera: 640 x 480, vertical fov 30 to 55 deg, elevation -5 to 40 deg, the probe 60 to 300
+  px tall somewhere in the frame;
+- the sensor: no noise (30 %) or multiplicative Gaussian noise of 0.5 to 3 %, and a clip at
+  the 98th to 99.5th percentile of the probe's brightest channel in 20 % of the scenes.
+
+The photo is Mitsuba's `path` integrator (max depth 4: shadows and inter-reflections) with our
+BRDF (tools/mitsuba_scenes.py), the environment behind the probe composited by the coverage of
+that render (emitters hidden: the film's alpha is the probe's coverage of each pixel, from all
+`--spp` samples); the mask is coverage >= 0.5.
+
+Needs Mitsuba 3 and numpy (tools/README.md).
+"""
+
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+import time
+
+import numpy as np
+
+import alp_mitsuba as am
+import bench_lighting as bl
+import bench_probes as bp
+import mitsuba_scenes as ms
+
+SEED = 20261203
+SPLITS = {"train": 1, "test": 2}
+BUNDLED = {"train": ("courtyard", "studio"), "test": ("sunset",)}
+FAMILY_WEIGHTS = {"can": 0.35, "cap": 0.25, "bottle": 0.15, "sphere": 0.10, "ring": 0.15}
+POSE_WEIGHTS = {"upright": 0.5, "tilted": 0.25, "lying": 0.25}
+LIGHT_WEIGHTS = {"bundled": 0.4, "sky": 0.3, "room": 0.3}
+WIDTH, HEIGHT = 640, 480
+MAX_DEPTH = 4
+
+
+def _choice(rng, weights):
+    keys = list(weights)
+    return keys[int(rng.choice(len(keys), p=np.array([weights[k] for k in keys]) / sum(weights.values())))]
+
+
+def _rotation(axis, angle):
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+
+
+def draw_pose(rng, kind, centre):
+    """to_world (4 x 4) putting the probe's centre at the origin, its +Y axis tilted by the
+    kind's angle towards a random azimuth, turned at random about its axis; and the tilt."""
+    tilt = {"upright": (0.0, 5.0), "tilted": (15.0, 65.0), "lying": (80.0, 100.0)}[kind]
+    tilt = rng.uniform(*tilt)
+    azimuth = rng.uniform(0, 2 * math.pi)
+    turn = _rotation([0, 1, 0], rng.uniform(0, 2 * math.pi))
+    lean = _rotation([math.cos(azimuth), 0, math.sin(azimuth)], math.radians(tilt))
+    r = lean @ turn
+    m = np.eye(4)
+    m[:3, :3] = r
+    m[:3, 3] = -r @ np.asarray(centre)
+    return m, tilt
+
+
+def draw_camera(rng, probe_mesh, pose):
+    """A camera that sees the probe 60 to 300 px tall from -5 to 40 deg elevation, placed at a
+    random spot of the frame (wholly inside it, 8 px from the edges)."""
+    fov = rng.uniform(30.0, 55.0)
+    elevation = math.radians(rng.uniform(-5.0, 40.0))
+    azimuth = rng.uniform(0, 2 * math.pi)
+    target_px = math.exp(rng.uniform(math.log(60.0), math.log(300.0)))
+    spot = rng.uniform(-1.0, 1.0, 2)
+    forward = -np.array([math.cos(elevation) * math.sin(azimuth), math.sin(elevation),
+                         math.cos(elevation) * math.cos(azimuth)])
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    pts = am.read_obj_positions(probe_mesh) @ pose[:3, :3].T + pose[:3, 3]
+    radius = float(np.linalg.norm(pts, axis=1).max())
+
+    def placed(distance, shift):
+        cam = {"width": WIDTH, "height": HEIGHT, "fov_y_deg": fov, "up": [0.0, 1.0, 0.0],
+               "origin": (shift - forward * distance).tolist(), "target": shift.tolist()}
+        col, row = am.project(cam, pts)
+        return cam, (col.min(), col.max(), row.min(), row.max())
+
+    distance = 10 * radius
+    for _ in range(4):  # the distance that gives the drawn height and fits the frame
+        _, (x0, x1, y0, y1) = placed(distance, np.zeros(3))
+        distance = max(distance * max((y1 - y0) / target_px, (x1 - x0) / (WIDTH - 24),
+                                      (y1 - y0) / (HEIGHT - 24)), 2.5 * radius)
+    # Slide the camera sideways (the view direction stays) until the probe's box sits at the
+    # drawn spot; up close, perspective makes this nonlinear, so iterate and check.
+    for reach in (1.0, 0.5, 0.25, 0.0):
+        shift = np.zeros(3)
+        for _ in range(6):
+            cam, (x0, x1, y0, y1) = placed(distance, shift)
+            want_x = WIDTH / 2 + spot[0] * reach * max(WIDTH / 2 - 8 - (x1 - x0) / 2, 0)
+            want_y = HEIGHT / 2 + spot[1] * reach * max(HEIGHT / 2 - 8 - (y1 - y0) / 2, 0)
+            per_px = 2 * distance * math.tan(math.radians(fov) / 2) / HEIGHT
+            shift = shift - right * (want_x - (x0 + x1) / 2) * per_px + up * (want_y - (y0 + y1) / 2) * per_px
+        cam, (x0, x1, y0, y1) = placed(distance, shift)
+        if x0 >= 8 and y0 >= 8 and x1 <= WIDTH - 8 and y1 <= HEIGHT - 8:
+            break
+    return cam, {"fov_y_deg": round(fov, 2), "elevation_deg": round(math.degrees(elevation), 2),
+                 "probe_px": round(float(y1 - y0), 1)}
+
+
+def draw_scene(split, index):
+    """Everything about one scene but the render: (name, meta, rng, lighting draw)."""
+    rng = np.random.default_rng([SEED, SPLITS[split], index])
+    family = _choice(rng, FAMILY_WEIGHTS)
+    pose_kind = _choice(rng, POSE_WEIGHTS)
+    light = _choice(rng, LIGHT_WEIGHTS)
+    name = "%03d_%s_%s_%s" % (index, family, pose_kind, light)
+    return name, rng, family, pose_kind, light
+
+
+def make_scene(mi, split, index, folder, spp, sources):
+    name, rng, family, pose_kind, light = draw_scene(split, index)
+    t0 = time.time()
+    tmp = folder + ".tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    os.makedirs(tmp)
+    probe_info = bp.make_probe(family, rng, os.path.join(tmp, "probe"), am.write_exr)
+    pose, tilt = draw_pose(rng, pose_kind, probe_info["centre_m"])
+    if light == "bundled":
+        source = str(rng.choice(BUNDLED[split]))
+        env, light_info = bl.bundled(rng, sources[source])
+        light_info["source"] = source
+    elif light == "sky":
+        env, light_info = bl.sky(rng, mi)
+    else:
+        env, light_info = bl.room(rng)
+    cam, cam_info = draw_camera(rng, os.path.join(tmp, "probe", "mesh.obj"), pose)
+    noise = 0.0 if rng.random() < 0.3 else float(rng.uniform(0.005, 0.03))
+    clip_quantile = float(rng.uniform(98.0, 99.5)) if rng.random() < 0.2 else None
+    seed = int(rng.integers(0, 100000))  # mitsuba_scenes.render seeds passes with seed x 7919 + k: 32 bits
+
+    probe = am.load_probe(os.path.join(tmp, "probe"))
+    image, alpha = ms.render(mi, probe, pose, cam, env, spp, MAX_DEPTH, seed)
+    mask = alpha >= 0.5
+    if mask.sum() < 50:
+        sys.exit("%s: the probe covers %d pixels (the draw is broken)" % (name, mask.sum()))
+    image = image + (1.0 - alpha[..., None]) * ms.env_background(cam, env)
+    clip = None
+    if clip_quantile is not None:
+        clip = float(np.percentile(image[mask].max(axis=1), clip_quantile))
+    image = ms.sensor(image, noise, clip, seed)
+
+    am.write_exr(os.path.join(tmp, "image.exr"), image)
+    am.write_exr(os.path.join(tmp, "gt_env.exr"), env)
+    am.write_png(os.path.join(tmp, "mask.png"), np.where(mask, 255, 0).astype(np.uint8))
+    with open(os.path.join(tmp, "camera.json"), "w") as f:
+        json.dump(cam, f, indent=1)
+    with open(os.path.join(tmp, "pose.json"), "w") as f:
+        json.dump({"to_world": pose.tolist()}, f)
+    with open(os.path.join(tmp, "probe.txt"), "w") as f:
+        f.write("probe\n")
+    meta = {"name": name, "split": split, "index": index, "seed": seed, "family": family,
+            "orientation": probe_info["orientation"], "pose_kind": pose_kind, "tilt_deg": round(tilt, 2),
+            "lighting": light, "probe": probe_info, "light": light_info, "camera": cam_info,
+            "mask_pixels": int(mask.sum()), "noise": round(noise, 4), "exposure_clip": clip,
+            "renderer": "mitsuba %s path max_depth %d, box filter, env background" % (mi.variant(), MAX_DEPTH),
+            "mitsuba_spp": spp, "make_s": round(time.time() - t0, 2)}
+    with open(os.path.join(tmp, "scene.json"), "w") as f:
+        json.dump(meta, f, indent=1)
+    shutil.rmtree(folder, ignore_errors=True)
+    os.rename(tmp, folder)
+    return meta
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", required=True, help="benchmark folder: train/ and test/ go here")
+    ap.add_argument("--train", type=int, default=48, help="scenes in the train split")
+    ap.add_argument("--test", type=int, default=48, help="scenes in the test split")
+    ap.add_argument("--spp", type=int, default=512)
+    ap.add_argument("--envmaps", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets", "envmaps"))
+    ap.add_argument("--variant", default="llvm_ad_rgb", choices=["scalar_rgb", "llvm_ad_rgb"])
+    ap.add_argument("--preview", action="store_true", help="also write preview.png (tone-mapped photo) per scene")
+    args = ap.parse_args()
+    mi = am.setup_variant(args.variant)
+    sources = {n: am.read_exr(os.path.join(args.envmaps, n + ".exr")) for s in BUNDLED.values() for n in s}
+    for split, count in (("train", args.train), ("test", args.test)):
+        root = os.path.join(args.out, split)
+        os.makedirs(root, exist_ok=True)
+        for index in range(count):
+            name = draw_scene(split, index)[0]
+            folder = os.path.join(root, name)
+            meta_path = os.path.join(folder, "scene.json")
+            if os.path.isfile(meta_path) and am.read_json(meta_path).get("mitsuba_spp") == args.spp:
+                continue
+            meta = make_scene(mi, split, index, folder, args.spp, sources)
+            if args.preview:
+                img = am.read_exr(os.path.join(folder, "image.exr"))
+                am.write_png(os.path.join(folder, "preview.png"), am.tonemap(img, 0.6 / max(np.median(img), 1e-6)))
+            print("%-6s %-36s %5d px %6.1f s" % (split, name, meta["mask_pixels"], meta["make_s"]), flush=True)
+
+
+if __name__ == "__main__":
+    main()

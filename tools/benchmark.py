@@ -1,0 +1,184 @@
+#!/usr/bin/env python3
+"""`alp estimate` on the development benchmark (tools/bench_scenes.py): every scene of the
+train and test splits, scored by `alp eval`, summarized per split, probe family and pose kind,
+with the train-test gap. Python 3 standard library only.
+
+    python3 tools/benchmark.py --alp target/release/alp --bench DIR [--splits train,test]
+        [--quality default] [--threads 2] [--out DIR/results/default] [--only SUBSTR,...]
+
+Writes OUT/results.jsonl (one line per scene: scene.json's draw, `alp eval`'s fields, success,
+wall_s, cpu_s, max_rss_mb) and OUT/summary.md, and prints the summary. A rerun with the same
+binary keeps the lines it already has (delete results.jsonl to start over), so an interrupted
+run resumes. Tune on train; report test.
+
+A pose is found when the observable part of it is within 5 degrees: the rotation for a probe
+whose label breaks its symmetry ("full"), the axis direction for one symmetric about its axis
+("axis"), the axis line for one also symmetric end for end ("line": a ring), and for a sphere
+("none") the position within a tenth of its radius.
+"""
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+
+import eval_suite as es
+
+SUCCESS_DEG = 5.0
+POSE_KINDS = ("upright", "tilted", "lying")
+
+
+def found(rec):
+    if rec.get("error"):
+        return False
+    o = rec["orientation"]
+    if o == "full":
+        return rec["rotation_deg"] < SUCCESS_DEG
+    if o == "axis":
+        return rec["axis_deg"] < SUCCESS_DEG
+    if o == "line":
+        return min(rec["axis_deg"], 180.0 - rec["axis_deg"]) < SUCCESS_DEG
+    return rec["translation_mm"] < rec["diameter_mm"] / 20.0
+
+
+def run_scene(args, split, scene_dir, cache):
+    with open(os.path.join(scene_dir, "scene.json")) as f:
+        meta = json.load(f)
+    name = meta["name"]
+    est_dir = os.path.join(args.out, "runs", split, name)
+    shutil.rmtree(est_dir, ignore_errors=True)
+    os.makedirs(os.path.dirname(est_dir), exist_ok=True)
+    rec = {"split": split, "scene": name, "family": meta["family"], "orientation": meta["orientation"],
+           "pose_kind": meta["pose_kind"], "tilt_deg": meta["tilt_deg"], "lighting": meta["lighting"],
+           "label": meta["probe"].get("label"), "metal": meta["probe"].get("metal"),
+           "diameter_mm": meta["probe"]["diameter_mm"], "triangles": meta["probe"]["triangles"],
+           "probe_px": meta["camera"]["probe_px"], "elevation_deg": meta["camera"]["elevation_deg"],
+           "noise": meta["noise"], "exposure_clip": meta["exposure_clip"], "quality": args.quality,
+           "threads": args.threads, "alp_sha256": args.alp_sha[:12], "load_1m": round(os.getloadavg()[0], 2)}
+    cmd = [args.alp, "estimate", "--image", os.path.join(scene_dir, "image.exr"),
+           "--mask", os.path.join(scene_dir, "mask.png"), "--camera", os.path.join(scene_dir, "camera.json"),
+           "--probe", os.path.join(scene_dir, "probe"), "--out", est_dir, "--quality", args.quality,
+           "--threads", str(args.threads), "--seed", "0"]
+    try:
+        _, wall, rss, cpu = es.run(cmd, cwd=args.out, log_path=est_dir + ".estimate.log")
+        rec.update(wall_s=round(wall, 3), cpu_s=round(cpu, 3), max_rss_mb=round(rss, 1))
+        ev = es.evaluate(args.alp, args.out, scene_dir, est_dir, args.eval_spp, cache, args.alp_sha)
+        rec.update({k: v for k, v in ev.items() if k != "scene"})
+    except (es.AlpError, OSError, ValueError, KeyError) as e:
+        rec["error"] = str(e)
+    rec["success"] = found(rec)
+    return rec
+
+
+def stats(recs):
+    ok = [r for r in recs if not r.get("error")]
+    vals = lambda k: [r[k] for r in ok if r.get(k) is not None]
+    return {"n": len(recs), "errors": len(recs) - len(ok),
+            "ang": [es.mean([r[s]["angular_deg"] for r in ok]) for s in ("mirror", "shiny", "diffuse")],
+            "found": sum(r["success"] for r in recs), "wall_med": es.median(vals("wall_s")),
+            "rss_max": max(vals("max_rss_mb"), default=None)}
+
+
+def row(label, s):
+    ang = " / ".join(es.fmt(a) for a in s["ang"])
+    pct = 100.0 * s["found"] / s["n"] if s["n"] else 0.0
+    return "| %s | %d | %s | %d / %d (%.0f %%) | %s | %s |" % (
+        label, s["n"], ang, s["found"], s["n"], pct, es.fmt(s["wall_med"], 1), es.fmt(s["rss_max"], 0))
+
+
+def summary(records, cmdline):
+    head = ("| %s | scenes | mean angular error, mirror / shiny / diffuse (deg) | poses found | "
+            "median wall (s) | peak RSS (MB) |\n|---|---|---|---|---|---|")
+    lines = ["# Benchmark: `alp estimate` on the train and test splits", "", "`%s`" % cmdline, ""]
+    splits = [s for s in ("train", "test") if any(r["split"] == s for r in records)]
+    by = {s: [r for r in records if r["split"] == s] for s in splits}
+    lines += [head % "split"] + [row(s, stats(by[s])) for s in splits]
+    if len(splits) == 2:
+        tr, te = stats(by["train"]), stats(by["test"])
+        gap = ["-" if a is None or b is None else "%+.2f" % (b - a) for a, b in zip(tr["ang"], te["ang"])]
+        lines.append("| gap (test - train) | | %s | %+.0f points | | |" % (
+            " / ".join(gap), 100.0 * (te["found"] / te["n"] - tr["found"] / tr["n"])))
+    for key, title in (("family", "probe family"), ("pose_kind", "pose kind"), ("lighting", "lighting")):
+        for s in splits:
+            groups = sorted({r[key] for r in by[s]}, key=lambda g: (POSE_KINDS.index(g) if g in POSE_KINDS else 9, g))
+            lines += ["", "## %s, by %s" % (s, title), "", head % title]
+            lines += [row(g, stats([r for r in by[s] if r[key] == g])) for g in groups]
+    failed = [r for r in records if not r["success"]]
+    if failed:
+        lines += ["", "## Poses not found", "", "| split | scene | rotation | axis | translation (mm) | error |",
+                  "|---|---|---|---|---|---|"]
+        for r in failed:
+            lines.append("| %s | %s | %s | %s | %s | %s |" % (
+                r["split"], r["scene"], es.fmt(r.get("rotation_deg"), 1), es.fmt(r.get("axis_deg"), 1),
+                es.fmt(r.get("translation_mm"), 1), "".join((r.get("error") or "").splitlines()[-1:])))
+    return "\n".join(lines) + "\n"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--alp", required=True, help="the alp binary")
+    ap.add_argument("--bench", required=True, help="the benchmark folder (train/, test/) of bench_scenes.py")
+    ap.add_argument("--splits", default="train,test")
+    ap.add_argument("--quality", default="default")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--out", default=None, help="results folder (default BENCH/results/QUALITY)")
+    ap.add_argument("--only", default="", help="keep scenes whose name contains one of these (comma-separated)")
+    ap.add_argument("--eval-spp", type=int, default=256, help="alp eval --spp")
+    args = ap.parse_args()
+    es.RSS_VIA = "auto"
+    args.alp = os.path.abspath(args.alp)
+    args.out = os.path.abspath(args.out or os.path.join(args.bench, "results", args.quality))
+    args.alp_sha = es.sha256_files([args.alp], "")
+    os.makedirs(args.out, exist_ok=True)
+    cmdline = " ".join(["python3", "tools/benchmark.py"] + sys.argv[1:])
+    results = os.path.join(args.out, "results.jsonl")
+    kept = {}
+    if os.path.exists(results):
+        with open(results) as f:
+            for line in f:
+                r = json.loads(line)
+                if r["alp_sha256"] == args.alp_sha[:12] and r["quality"] == args.quality:
+                    kept[(r["split"], r["scene"])] = r
+    cache_path = os.path.join(args.out, "eval_cache.json")
+    cache = json.load(open(cache_path)) if os.path.exists(cache_path) else {}
+    plan = []
+    for split in filter(None, args.splits.split(",")):
+        root = os.path.join(args.bench, split)
+        if not os.path.isdir(root):
+            sys.exit("%s: no such split folder (make it with tools/bench_scenes.py)" % root)
+        names = sorted(n for n in os.listdir(root) if os.path.isfile(os.path.join(root, n, "scene.json")))
+        plan += [(split, os.path.join(root, n)) for n in names
+                 if not args.only or any(w in n for w in args.only.split(",") if w)]
+    if not plan:
+        sys.exit("no scenes to run in %s" % args.bench)
+    records = []
+    with open(results, "a") as out:
+        for k, (split, scene_dir) in enumerate(plan):
+            key = (split, os.path.basename(scene_dir))
+            rec = kept.get(key)
+            if rec is None:
+                t0 = time.perf_counter()
+                rec = run_scene(args, split, scene_dir, cache)
+                print("[%d/%d] %s/%s: %s (%.0f s)" % (
+                    k + 1, len(plan), split, key[1], "ERROR " + rec["error"].splitlines()[-1] if rec.get("error") else
+                    "%s, rot %.1f axis %.1f, ang %.1f / %.1f / %.1f" % (
+                        "found" if rec["success"] else "NOT FOUND", rec["rotation_deg"], rec["axis_deg"],
+                        rec["mirror"]["angular_deg"], rec["shiny"]["angular_deg"], rec["diffuse"]["angular_deg"]),
+                    time.perf_counter() - t0), file=sys.stderr, flush=True)
+            records.append(rec)
+            if key not in kept:
+                out.write(json.dumps(rec) + "\n")
+                out.flush()
+    with open(results + ".tmp", "w") as f:  # the kept and new lines, in the plan's order
+        f.writelines(json.dumps(r) + "\n" for r in records)
+    os.replace(results + ".tmp", results)
+    text = summary(records, cmdline)
+    with open(os.path.join(args.out, "summary.md"), "w") as f:
+        f.write(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
