@@ -19,14 +19,18 @@ import numpy as np
 W, H = 512, 256
 
 
-def directions(w, h, sub=1, jitter=None):
-    """Unit directions (h, w, sub*sub, 3) of a sub x sub grid in each texel (FORMATS.md: u =
-    atan2(x, -z) / 2 pi, v = acos(y) / pi, row 0 up)."""
+def directions(w, h, sub=1, texels=None):
+    """Unit directions of a sub x sub grid in each texel of a w x h map (FORMATS.md: u =
+    atan2(x, -z) / 2 pi, v = acos(y) / pi, row 0 up): (h, w, sub*sub, 3), or (n, sub*sub, 3)
+    for the n texels (rows, cols) of `texels`."""
     k = (np.arange(sub) + 0.5) / sub
-    ju, jv = np.meshgrid(k, k)
-    u = (np.arange(w)[None, :, None] + ju.reshape(1, 1, -1)) / w
-    v = (np.arange(h)[:, None, None] + jv.reshape(1, 1, -1)) / h
-    u, v = np.broadcast_arrays(u, v)
+    ju, jv = (g.reshape(1, -1) for g in np.meshgrid(k, k))
+    if texels is None:
+        rows, cols = np.mgrid[0:h, 0:w]
+    else:
+        rows, cols = texels
+    u = (cols[..., None] + ju) / w
+    v = (rows[..., None] + jv) / h
     theta, phi = v * math.pi, u * 2 * math.pi
     return np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
 
@@ -94,7 +98,7 @@ def sky(rng, mi):
     centre = directions(W, H)[:, :, 0]
     near = np.nonzero(centre @ sun > math.cos(math.radians(2.0)))
     if near[0].size:
-        fine = directions(W, H, 32)[near]
+        fine = directions(W, H, 32, near)
         img[near] = _eval_emitter(mi, emitter, fine).mean(axis=1)
     # The ground and a skyline reflect the sky's light on the horizontal: E / pi x albedo.
     up = centre[:, :, 1]
