@@ -4,10 +4,11 @@ drawn at random per scene, written as probe folders (shared/FORMATS.md) that our
 Families, each from a random generator `rng` (numpy):
 
     can     a drinks can: concave base, necked top with a rim round a recessed lid; a label of
-            a random design (bands, stripes, a logo window) in a saturated or metallic colour
+            a random design (bands, stripes, logos and text all round) in a saturated or metallic
+            colour
     cap     a cap or lid, squat to tall (height / diameter 0.25 to 1.2), often with grooves
             round its side and a recessed top; one metal, two roughnesses (side, top)
-    bottle  a metal bottle: body, shoulder, neck, lip; half of them with a label band and logo
+    bottle  a metal bottle: body, shoulder, neck, lip; half of them with a label
     sphere  a ball bearing or ornament: one metal
     ring    a torus (finger ring): one metal
 
@@ -137,7 +138,7 @@ def write_obj(path, p, uv, n, faces):
 
 def _label(rng, colour):
     """A label's albedo and roughness (TEX x TEX over the label's u, v range): a base colour,
-    bands and thin silver stripes round the can, and a logo window at a random u."""
+    bands and thin silver stripes round the can, logos and lines of text at random places."""
     base = _jitter(rng, COLOURS[colour])
     r_base = _rough(rng, 0.08, 0.4)
     alb = np.broadcast_to(base, (TEX, TEX, 3)).copy()
@@ -151,17 +152,24 @@ def _label(rng, colour):
         second = rng.random() < 0.5
         alb[m] = silver if second else _jitter(rng, COLOURS[rng.choice(list(COLOURS))])
         rough[m] = r_silver if second else _rough(rng, 0.05, 0.4)
-    # The logo: an ellipse or a box of another colour, which tells the turn about the axis.
-    u0, v0 = rng.uniform(0, 1), rng.uniform(0.3, 0.7)
-    hu, hv = rng.uniform(0.06, 0.15), rng.uniform(0.12, 0.3)
-    du = (uu - u0 + 0.5) % 1.0 - 0.5
-    if rng.random() < 0.5:
-        m = (du / hu) ** 2 + ((vv - v0) / hv) ** 2 < 1
-    else:
-        m = (np.abs(du) < hu) & (np.abs(vv - v0) < hv)
-    logo = rng.choice([k for k in COLOURS if k != colour])
-    alb[m] = _jitter(rng, COLOURS[logo])
-    rough[m] = _rough(rng, 0.03, 0.3)
+    # Logos and lines of text all round the can, of other colours: from any side the photo shows
+    # some, which tell the turn about the axis.
+    others = [k for k in COLOURS if k != colour]
+    for _ in range(rng.integers(3, 7)):
+        u0, v0 = rng.uniform(0, 1), rng.uniform(0.2, 0.8)
+        hu, hv = rng.uniform(0.03, 0.1), rng.uniform(0.08, 0.25)
+        du = (uu - u0 + 0.5) % 1.0 - 0.5
+        if rng.random() < 0.5:
+            m = (du / hu) ** 2 + ((vv - v0) / hv) ** 2 < 1
+        else:
+            m = (np.abs(du) < hu) & (np.abs(vv - v0) < hv)
+        alb[m] = _jitter(rng, COLOURS[rng.choice(others)])
+        rough[m] = _rough(rng, 0.03, 0.3)
+    text = _jitter(rng, COLOURS[rng.choice(others)])
+    for _ in range(rng.integers(8, 30)):
+        u0, v0 = rng.uniform(0, 1), rng.uniform(0.05, 0.95)
+        m = (np.abs((uu - u0 + 0.5) % 1.0 - 0.5) < rng.uniform(0.01, 0.05)) & (np.abs(vv - v0) < rng.uniform(0.004, 0.015))
+        alb[m] = text
     return alb, rough
 
 

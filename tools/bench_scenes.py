@@ -45,6 +45,7 @@ import bench_probes as bp
 import mitsuba_scenes as ms
 
 SEED = 20261203
+VERSION = 2  # of the draw: scenes of another version are made anew
 SPLITS = {"train": 1, "test": 2}
 BUNDLED = {"train": ("courtyard", "studio"), "test": ("sunset",)}
 FAMILY_WEIGHTS = {"can": 0.35, "cap": 0.25, "bottle": 0.15, "sphere": 0.10, "ring": 0.15}
@@ -175,7 +176,7 @@ def make_scene(mi, split, index, folder, spp, sources):
         json.dump({"to_world": pose.tolist()}, f)
     with open(os.path.join(tmp, "probe.txt"), "w") as f:
         f.write("probe\n")
-    meta = {"name": name, "split": split, "index": index, "seed": seed, "family": family,
+    meta = {"name": name, "version": VERSION, "split": split, "index": index, "seed": seed, "family": family,
             "orientation": probe_info["orientation"], "pose_kind": pose_kind, "tilt_deg": round(tilt, 2),
             "lighting": light, "probe": probe_info, "light": light_info, "camera": cam_info,
             "mask_pixels": int(mask.sum()), "noise": round(noise, 4), "exposure_clip": clip,
@@ -207,7 +208,8 @@ def main():
             name = draw_scene(split, index)[0]
             folder = os.path.join(root, name)
             meta_path = os.path.join(folder, "scene.json")
-            if os.path.isfile(meta_path) and am.read_json(meta_path).get("mitsuba_spp") == args.spp:
+            made = am.read_json(meta_path) if os.path.isfile(meta_path) else {}
+            if made.get("mitsuba_spp") == args.spp and made.get("version") == VERSION:
                 continue
             meta = make_scene(mi, split, index, folder, args.spp, sources)
             if args.preview:
