@@ -107,12 +107,12 @@ def revolve(profile, triangles, groove=None):
     a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
     faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([b, d, c], -1).reshape(-1, 3)])
     p = pos.reshape(-1, 3)
-    # Drop the faces that collapse on the axis (r = 0 at both ends of a profile).
-    area = np.linalg.norm(np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]), axis=1)
-    faces = faces[area > 1e-14]
-    # A profile that keeps the solid on its left (up the outside, inward over the top) gives
-    # outward faces; vertex normals are area-weighted, welded across the seam and the poles.
+    # Drop the faces that collapse on the axis (r = 0 at both ends of a profile). A profile
+    # that keeps the solid on its left (up the outside, inward over the top) gives outward
+    # faces; vertex normals are area-weighted, welded across the seam and the poles.
     fn = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    kept = np.linalg.norm(fn, axis=1) > 1e-14
+    faces, fn = faces[kept], fn[kept]
     key = np.round(p / 1e-9).astype(np.int64)
     _, weld = np.unique(key, axis=0, return_inverse=True)
     weld = weld.reshape(-1)
@@ -173,14 +173,14 @@ def _label(rng, colour):
     return alb, rough
 
 
-def _paint(v_profile, regions, tex_rows=TEX):
+def _paint(regions):
     """Albedo and roughness textures from regions along the profile: a list of (v0, v1, albedo,
     roughness) over the profile's arc-length fraction v (0 = first profile point), where albedo
     and roughness are constants or (TEX x TEX) arrays spanning [v0, v1]. Later regions win."""
-    alb = np.zeros((tex_rows, TEX, 3))
-    rough = np.zeros((tex_rows, TEX))
+    alb = np.zeros((TEX, TEX, 3))
+    rough = np.zeros((TEX, TEX))
     # Texture row k holds vt v = 1 - (k + 0.5) / rows, i.e. profile fraction (k + 0.5) / rows.
-    frac = (np.arange(tex_rows) + 0.5) / tex_rows
+    frac = (np.arange(TEX) + 0.5) / TEX
     for v0, v1, a, r in regions:
         rows = np.nonzero((frac >= v0) & (frac <= v1))[0]
         if rows.size == 0:
@@ -213,7 +213,7 @@ def can(rng, triangles):
     v0, v1 = _profile_fraction(prof, 0.1 * H), _profile_fraction(prof, 0.86 * H)
     end = (_jitter(rng, COLOURS["silver"], 0.02), _rough(rng, 0.1, 0.3))
     lab = _label(rng, colour)
-    alb, rough = _paint(prof, [(0, 1, end[0], end[1]), (v0, v1, lab[0], lab[1])])
+    alb, rough = _paint([(0, 1, end[0], end[1]), (v0, v1, lab[0], lab[1])])
     return prof, None, alb, rough, "full", {"label": str(colour), "diameter_mm": round(2000 * R, 1),
                                             "height_mm": round(1000 * H, 1)}
 
@@ -232,7 +232,7 @@ def cap(rng, triangles):
     colour = _jitter(rng, COLOURS[metal])
     side, top = _rough(rng), _rough(rng)
     vt = _profile_fraction(prof, H * 0.999)
-    alb, rough = _paint(prof, [(0, 1, colour, side), (vt, 1, colour, top)])
+    alb, rough = _paint([(0, 1, colour, side), (vt, 1, colour, top)])
     return prof, grooves, alb, rough, "axis", {"metal": str(metal), "diameter_mm": round(2000 * R, 1),
                                                "height_mm": round(1000 * H, 1), "grooves": 0 if grooves is None else grooves[0],
                                                "recess_mm": round(1000 * depth, 1)}
@@ -261,7 +261,7 @@ def bottle(rng, triangles):
         regions.append((_profile_fraction(prof, 0.2 * body), _profile_fraction(prof, 0.8 * body), lab[0], lab[1]))
         orientation = "full"
         info["label"] = str(colour)
-    alb, rough = _paint(prof, regions)
+    alb, rough = _paint(regions)
     return prof, None, alb, rough, orientation, info
 
 
@@ -269,7 +269,7 @@ def sphere(rng, triangles):
     R = rng.uniform(0.015, 0.05)
     prof = np.array([(R * math.sin(t), -R * math.cos(t)) for t in np.linspace(0, math.pi, 200)])
     metal = rng.choice(METALS)
-    alb, rough = _paint(prof, [(0, 1, _jitter(rng, COLOURS[metal]), _rough(rng, 0.03, 0.3))])
+    alb, rough = _paint([(0, 1, _jitter(rng, COLOURS[metal]), _rough(rng, 0.03, 0.3))])
     return prof, None, alb, rough, "none", {"metal": str(metal), "diameter_mm": round(2000 * R, 1)}
 
 
@@ -282,7 +282,7 @@ def ring(rng, triangles):
              w * math.copysign(abs(math.sin(a)) ** 0.5, math.sin(a))) for a in np.linspace(-math.pi, math.pi, 160)]
     prof = np.array(loop)
     metal = rng.choice(("gold", "silver", "gold"))
-    alb, rough = _paint(prof, [(0, 1, _jitter(rng, COLOURS[metal]), _rough(rng, 0.03, 0.2))])
+    alb, rough = _paint([(0, 1, _jitter(rng, COLOURS[metal]), _rough(rng, 0.03, 0.2))])
     return prof, None, alb, rough, "line", {"metal": str(metal), "diameter_mm": round(2000 * (Rm + t), 1)}
 
 

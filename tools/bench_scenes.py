@@ -7,7 +7,8 @@ estimate` on. Constants and choices of the estimate are tuned on train only; tes
 makes DIR/train/NNN_<family>_<pose>_<lighting>/ and DIR/test/..., each holding image.exr,
 mask.png, camera.json, pose.json, gt_env.exr, probe.txt ("probe"), the probe folder probe/ and
 scene.json (everything drawn, for the reports). Existing scenes whose scene.json matches the
-draw are kept, so an interrupted run resumes. About 6 s per scene on 2 cores.
+draw version (VERSION) and spp are kept, so an interrupted run resumes. About 4 s per scene
+on 2 cores (both splits: 6.6 min).
 
 Each scene draws, from its own seed:
 - a probe (tools/bench_probes.py): can 35 %, cap 25 %, bottle 15 %, sphere 10 %, ring 15 %;
@@ -110,13 +111,13 @@ def draw_camera(rng, probe_mesh, pose):
                                       (y1 - y0) / (HEIGHT - 24)), 2.5 * radius)
     # Slide the camera sideways (the view direction stays) until the probe's box sits at the
     # drawn spot; up close, perspective makes this nonlinear, so iterate and check.
+    per_px = 2 * distance * math.tan(math.radians(fov) / 2) / HEIGHT  # metres at the probe
     for reach in (1.0, 0.5, 0.25, 0.0):
         shift = np.zeros(3)
         for _ in range(6):
             cam, (x0, x1, y0, y1) = placed(distance, shift)
             want_x = WIDTH / 2 + spot[0] * reach * max(WIDTH / 2 - 8 - (x1 - x0) / 2, 0)
             want_y = HEIGHT / 2 + spot[1] * reach * max(HEIGHT / 2 - 8 - (y1 - y0) / 2, 0)
-            per_px = 2 * distance * math.tan(math.radians(fov) / 2) / HEIGHT
             shift = shift - right * (want_x - (x0 + x1) / 2) * per_px + up * (want_y - (y0 + y1) / 2) * per_px
         cam, (x0, x1, y0, y1) = placed(distance, shift)
         if x0 >= 8 and y0 >= 8 and x1 <= WIDTH - 8 and y1 <= HEIGHT - 8:
@@ -126,7 +127,8 @@ def draw_camera(rng, probe_mesh, pose):
 
 
 def draw_scene(split, index):
-    """Everything about one scene but the render: (name, meta, rng, lighting draw)."""
+    """The scene's name and what it draws first (family, pose kind, lighting), with its
+    generator to draw the rest from: (name, rng, family, pose_kind, light)."""
     rng = np.random.default_rng([SEED, SPLITS[split], index])
     family = _choice(rng, FAMILY_WEIGHTS)
     pose_kind = _choice(rng, POSE_WEIGHTS)

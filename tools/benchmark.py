@@ -75,7 +75,7 @@ def run_scene(args, split, scene_dir, cache):
 def stats(recs):
     ok = [r for r in recs if not r.get("error")]
     vals = lambda k: [r[k] for r in ok if r.get(k) is not None]
-    return {"n": len(recs), "errors": len(recs) - len(ok),
+    return {"n": len(recs),
             "ang": [es.mean([r[s]["angular_deg"] for r in ok]) for s in ("mirror", "shiny", "diffuse")],
             "found": sum(r["success"] for r in recs), "wall_med": es.median(vals("wall_s")),
             "rss_max": max(vals("max_rss_mb"), default=None)}
