@@ -1,12 +1,13 @@
 //! Starting poses, from the mask and the camera: the probe's known size
 //! against the mask's extent gives the depth, the mask's barycenter the
-//! direction, and the mask's shape the hypotheses of where the probe's axis
-//! points (upright, along the mask's principal direction, end-on). Also the
-//! moves of a pose that the searches try: a turn about the axis, a lean
-//! towards the view ray, a sway across it, a change of size, the outline's
-//! look-alikes.
+//! direction, and a search over the whole sphere of axis directions, each
+//! scored by how well its outline covers the mask, the hypotheses of where
+//! the probe's axis points. Also the moves of a pose that the searches try:
+//! a turn about the axis, a lean towards the view ray, a sway across it, a
+//! change of size, the outline's look-alikes.
 
 use glam::{Mat3, Quat, Vec2, Vec3};
+use rayon::prelude::*;
 use render::camera::Camera;
 use render::image_io::Mask;
 use render::mesh::Mesh;
@@ -36,10 +37,8 @@ pub fn facing(camera: &Camera, axis: Vec3) -> Quat {
     Quat::from_mat3(&Mat3::from_cols(up.cross(toward), up, toward)).normalize()
 }
 
-/// The mask's barycenter, its bounding box (pixels), which of the image's
-/// sides it touches, its principal direction (unit, image x right and y
-/// down) and elongation (the ratio of the standard deviations along and
-/// across that direction).
+/// The mask's barycenter, its bounding box (pixels) and which of the
+/// image's sides it touches.
 pub struct MaskShape {
     /// Barycenter, pixels.
     pub barycenter: Vec2,
@@ -53,10 +52,6 @@ pub struct MaskShape {
     pub cut_lo: [bool; 2],
     /// Whether it reaches the high side (right, bottom).
     pub cut_hi: [bool; 2],
-    /// Direction of largest spread.
-    pub principal: Vec2,
-    /// Spread along the principal direction over the spread across it (>= 1).
-    pub elongation: f32,
 }
 
 impl MaskShape {
@@ -72,24 +67,11 @@ impl MaskShape {
         if points.is_empty() {
             return Err(Error::invalid("mask", "is empty: no pixel marks the probe"));
         }
-        let n = points.len() as f32;
-        let barycenter = points.iter().sum::<Vec2>() / n;
+        let barycenter = points.iter().sum::<Vec2>() / points.len() as f32;
         let (lo, hi) = points.iter().fold(
             (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY)),
             |(lo, hi), &p| (lo.min(p), hi.max(p)),
         );
-        let (mut sxx, mut sxy, mut syy) = (0.0f32, 0.0f32, 0.0f32);
-        for p in &points {
-            let d = *p - barycenter;
-            sxx += d.x * d.x / n;
-            sxy += d.x * d.y / n;
-            syy += d.y * d.y / n;
-        }
-        // Eigen-decomposition of the 2x2 covariance.
-        let half_trace = 0.5 * (sxx + syy);
-        let root = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
-        let (major, minor) = (half_trace + root, (half_trace - root).max(1e-6));
-        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
         let (lo, hi) = (lo - Vec2::splat(0.5), hi + Vec2::splat(0.5));
         let size = Vec2::new(mask.width as f32, mask.height as f32);
         Ok(MaskShape {
@@ -98,78 +80,142 @@ impl MaskShape {
             hi,
             cut_lo: [lo.x <= 0.0, lo.y <= 0.0],
             cut_hi: [hi.x >= size.x, hi.y >= size.y],
-            principal: Vec2::new(angle.cos(), angle.sin()),
-            elongation: (major / minor).sqrt(),
         })
     }
 }
 
-/// Where the probe's axis (mesh +Y) may point in the world, from what the
-/// mask shows and the probe's proportions: upright (along the camera's
-/// `up`); for an elongated mask, along the image direction the axis shows
-/// as (the mask's principal direction for a probe longer than wide, the
-/// direction across it for one wider than long, both when neither), both
-/// ways, either in the image plane or lying on a horizontal surface (the
-/// same image direction, horizontal in the world); for a round mask, along
-/// the view ray both ways (a probe seen end-on); for a mask the image's
-/// border cuts, all of these, along both of its directions. Upright is both ways too
-/// unless `top_known` (mesh +Y is the probe's top, as a probe standing on
-/// its -Y end is built; not so for one whose axis [`axis_to_y`](super::symmetry::axis_to_y) turned to
-/// +Y, whose ends are anyone's guess). Hypotheses within `HypothesisSettings::same_axis_deg`
-/// (15) degrees of an earlier one are left out.
+/// The mask on a coarse grid over its bounding box (grown by a quarter of
+/// its size each way, within the image): what an axis's outline is scored
+/// against, cheaply enough to score hundreds of axes.
+pub struct OutlineGrid {
+    /// Pixel position of the grid's low corner.
+    origin: Vec2,
+    /// Cell side, pixels.
+    cell: f32,
+    cols: usize,
+    rows: usize,
+    /// The share of each cell's pixels that the mask marks.
+    covered: Vec<f32>,
+}
+
+impl OutlineGrid {
+    /// `mask` (of bounding box `shape`) on a grid `cells` cells across its
+    /// longer side.
+    pub fn new(mask: &Mask, shape: &MaskShape, cells: usize) -> Self {
+        let margin = 0.25 * (shape.hi - shape.lo);
+        let size = Vec2::new(mask.width as f32, mask.height as f32);
+        let (lo, hi) = ((shape.lo - margin).max(Vec2::ZERO), (shape.hi + margin).min(size));
+        let cell = ((hi - lo).max_element() / cells.max(1) as f32).max(1.0);
+        let (cols, rows) = (((hi.x - lo.x) / cell).ceil() as usize, ((hi.y - lo.y) / cell).ceil() as usize);
+        let (mut covered, mut pixels) = (vec![0.0f32; cols * rows], vec![0.0f32; cols * rows]);
+        for y in lo.y as usize..(hi.y as usize).min(mask.height) {
+            for x in lo.x as usize..(hi.x as usize).min(mask.width) {
+                let c = (((x as f32 + 0.5 - lo.x) / cell) as usize).min(cols - 1);
+                let r = (((y as f32 + 0.5 - lo.y) / cell) as usize).min(rows - 1);
+                pixels[r * cols + c] += 1.0;
+                covered[r * cols + c] += mask.inside[y * mask.width + x] as u8 as f32;
+            }
+        }
+        for (c, n) in covered.iter_mut().zip(&pixels) {
+            *c /= n.max(1.0);
+        }
+        OutlineGrid {
+            origin: lo,
+            cell,
+            cols,
+            rows,
+            covered,
+        }
+    }
+
+    /// How well the outline of `mesh` at `pose` covers the mask: the
+    /// intersection over union of the shares of each cell that its
+    /// triangles cover (on a 3 x 3 grid of points per cell) and that the
+    /// mask marks. 1 is a perfect cover.
+    pub fn overlap(&self, mesh: &Mesh, camera: &Camera, pose: &Pose) -> f32 {
+        const SUB: usize = 3;
+        let to_sub = |p: Vec3| {
+            camera
+                .project(pose.transform_point(p))
+                .map(|px| (px - self.origin) / self.cell * SUB as f32)
+        };
+        let points: Vec<Option<Vec2>> = mesh.positions.iter().map(|&p| to_sub(p)).collect();
+        let (cols, rows) = (self.cols * SUB, self.rows * SUB);
+        let mut hit = vec![false; cols * rows];
+        for t in &mesh.triangles {
+            let [Some(a), Some(b), Some(c)] = t.map(|i| points[i as usize]) else {
+                continue;
+            };
+            let area = (b - a).perp_dot(c - a);
+            let (lo, hi) = (a.min(b).min(c).max(Vec2::ZERO), a.max(b).max(c).min(Vec2::new(cols as f32, rows as f32)));
+            if area == 0.0 || lo.x >= hi.x || lo.y >= hi.y {
+                continue;
+            }
+            for r in lo.y.floor() as usize..hi.y.ceil() as usize {
+                for col in lo.x.floor() as usize..hi.x.ceil() as usize {
+                    let p = Vec2::new(col as f32 + 0.5, r as f32 + 0.5);
+                    let w = [(c - b).perp_dot(p - b), (a - c).perp_dot(p - c), (b - a).perp_dot(p - a)];
+                    if w.iter().all(|&w| w * area >= 0.0) {
+                        hit[r * cols + col] = true;
+                    }
+                }
+            }
+        }
+        let (mut both, mut either) = (0.0f32, 0.0f32);
+        for (i, &m) in self.covered.iter().enumerate() {
+            let (r, c) = (i / self.cols * SUB, i % self.cols * SUB);
+            let h = (0..SUB * SUB).filter(|k| hit[(r + k / SUB) * cols + c + k % SUB]).count() as f32 / (SUB * SUB) as f32;
+            both += m.min(h);
+            either += m.max(h);
+        }
+        both / either.max(1e-6)
+    }
+}
+
+/// `n` axis directions spread evenly over the sphere (a Fibonacci lattice).
+pub fn sphere_of_axes(n: usize) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let phi = golden * i as f32;
+            Vec3::new(r * phi.cos(), y, r * phi.sin())
+        })
+        .collect()
+}
+
+/// Where the probe's axis (mesh +Y) may point in the world: every axis of
+/// [`sphere_of_axes`] (`HypothesisSettings::sphere_axes`) started by
+/// [`initial_pose`] and scored by its outline's cover of the mask
+/// ([`OutlineGrid::overlap`]); the best `HypothesisSettings::axes_fitted`
+/// that lie at least `same_axis_deg` apart, best first, with their scores.
+/// The outline cannot tell an axis from its mirror image across the view
+/// ray, nor (for like ends) from its reverse: those score alike, and the
+/// photo decides between them later.
 pub fn axis_hypotheses(
     camera: &Camera,
     shape: &MaskShape,
+    grid: &OutlineGrid,
     mesh: &Mesh,
-    top_known: bool,
     h: &HypothesisSettings,
-) -> Vec<Vec3> {
-    let up = camera.up.normalize();
-    let ray = camera.direction_through(shape.barycenter);
-    let mut candidates = match top_known {
-        true => vec![up],
-        false => vec![up, -up],
-    };
-    let (lo, hi) = mesh.bounds();
-    let (length, width) = (hi.y - lo.y, (hi.x - lo.x).max(hi.z - lo.z));
-    let across = Vec2::new(-shape.principal.y, shape.principal.x);
-    let round = shape.elongation <= h.round_mask;
-    // A mask the image's border cuts shows neither the probe's proportions
-    // nor whether it is round: every direction is tried.
-    let cut = shape.cut_lo.iter().chain(&shape.cut_hi).any(|&c| c);
-    let directions = if cut {
-        vec![shape.principal, across]
-    } else if round {
-        vec![]
-    } else if length > h.round_mask * width {
-        vec![shape.principal]
-    } else if width > h.round_mask * length {
-        vec![across]
-    } else {
-        vec![shape.principal, across]
-    };
-    for image_dir in directions {
-        // Image y grows downwards.
-        let d = camera.right * image_dir.x - camera.image_up * image_dir.y;
-        let in_plane = (d - ray * ray.dot(d)).normalize();
-        candidates.extend([in_plane, -in_plane]);
-        let lying = ray.cross(d).cross(up);
-        if lying.length() > 1e-3 {
-            let lying = lying.normalize() * lying.dot(d).signum();
-            candidates.extend([lying, -lying]);
-        }
-    }
-    if round || cut {
-        candidates.extend([-ray, ray]);
-    }
+) -> Vec<(Vec3, f32)> {
+    let mut scored: Vec<(Vec3, f32)> = sphere_of_axes(h.sphere_axes)
+        .into_par_iter()
+        .map(|axis| {
+            let pose = initial_pose(mesh, camera, shape, axis);
+            (axis, grid.overlap(mesh, camera, &pose))
+        })
+        .collect();
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
     let cos_same = h.same_axis_deg.to_radians().cos();
-    let mut axes: Vec<Vec3> = Vec::new();
-    for c in candidates {
-        if c.is_finite() && axes.iter().all(|a| a.dot(c) < cos_same) {
-            axes.push(c);
+    let mut kept: Vec<(Vec3, f32)> = Vec::new();
+    for (axis, score) in scored {
+        if kept.len() < h.axes_fitted && kept.iter().all(|(a, _)| a.dot(axis) < cos_same) {
+            kept.push((axis, score));
         }
     }
-    axes
+    kept
 }
 
 /// The starting pose with the probe's axis along `axis`, facing the camera:
@@ -436,22 +482,22 @@ mod tests {
                 (ratio - 1.0).abs() < 0.06,
                 "cut at the {cut}: depth {ratio} of the truth's"
             );
-            // A cut mask shows no proportions: the can lying across the
-            // image is tried too, though its mask stands taller than wide.
-            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, true, &h());
+            // The outline search finds the upright axis though the mask
+            // shows only part of the can.
+            let grid = OutlineGrid::new(&mask, &shape, h().outline_cells);
+            let axes = axis_hypotheses(&camera, &shape, &grid, &probe.mesh, &h());
             assert!(
-                axes.iter().any(|a| a.x.abs() > 0.97),
-                "cut at the {cut}: no axis across the image among {axes:?}"
+                axes.iter().any(|(a, _)| a.dot(Vec3::Y) > 15f32.to_radians().cos()),
+                "cut at the {cut}: no axis near upright among {axes:?}"
             );
         }
     }
 
     #[test]
-    fn one_axis_hypothesis_is_near_the_truth_whether_the_can_stands_lies_or_leans() {
-        let probe = SodaCan::default().build();
+    fn one_axis_hypothesis_is_near_the_truth_however_a_can_or_a_squat_cap_lies() {
+        let can = SodaCan::default().build();
+        let cap = render::procedural::ThermosCap::default().build();
         let camera = camera(0.25, 0.03);
-        // Upright; lying on the table at three headings; leaning towards the
-        // image's side; lying towards the camera (seen nearly end-on).
         let lying = |heading: f32| Quat::from_rotation_y(heading) * Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
         let cases = [
             ("upright", Quat::IDENTITY),
@@ -461,34 +507,30 @@ mod tests {
             ("leaning", Quat::from_rotation_z(0.6)),
             ("lying end-on", Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
             ("standing on its top", Quat::from_rotation_x(std::f32::consts::PI)),
+            ("tilted 55 deg in depth", Quat::from_rotation_x(55f32.to_radians())),
+            ("tilted 55 deg both ways", Quat::from_rotation_z(0.5) * Quat::from_rotation_x(55f32.to_radians())),
         ];
-        for (name, rotation) in cases {
-            let truth = Pose::new(
-                rotation,
-                1.0,
-                Vec3::new(0.0, 0.035, 0.0) - rotation * Vec3::new(0.0, 0.061, 0.0),
-            );
-            let mask = can_mask(&probe, &camera, &truth);
-            let shape = MaskShape::new(&mask).expect("a mask");
-            // A probe standing on its top is hypothesised as such only when
-            // its top is not known (the upside-down twins of the upright
-            // hypothesis cover it otherwise).
-            let top_known = name != "standing on its top";
-            let axes = axis_hypotheses(&camera, &shape, &probe.mesh, top_known, &h());
-            let true_axis = rotation * Vec3::Y;
-            let best = axes
-                .iter()
-                .map(|a| a.dot(true_axis).clamp(-1.0, 1.0).acos().to_degrees())
-                .fold(f32::INFINITY, f32::min);
-            assert!(
-                axes.len() <= 5 + !top_known as usize,
-                "{name}: {} hypotheses",
-                axes.len()
-            );
-            assert!(
-                best < 30.0,
-                "{name}: nearest hypothesis {best} deg from the axis ({axes:?})"
-            );
+        for (probe, kind) in [(&can, "can"), (&cap, "cap")] {
+            let (lo, hi) = probe.mesh.bounds();
+            let centre = 0.5 * (lo + hi);
+            for (name, rotation) in cases {
+                let truth = Pose::new(rotation, 1.0, Vec3::new(0.0, 0.035, 0.0) - rotation * centre);
+                let mask = can_mask(probe, &camera, &truth);
+                let shape = MaskShape::new(&mask).expect("a mask");
+                let grid = OutlineGrid::new(&mask, &shape, h().outline_cells);
+                let axes = axis_hypotheses(&camera, &shape, &grid, &probe.mesh, &h());
+                let true_axis = rotation * Vec3::Y;
+                // The truth's own outline covers its mask best of all.
+                let own = grid.overlap(&probe.mesh, &camera, &truth);
+                assert!(own > 0.9, "{kind} {name}: the true pose covers {own} of its mask");
+                // The outline cannot tell an axis from its reverse: either counts.
+                let best = axes
+                    .iter()
+                    .map(|(a, _)| a.dot(true_axis).abs().clamp(0.0, 1.0).acos().to_degrees())
+                    .fold(f32::INFINITY, f32::min);
+                assert!(axes.len() <= h().axes_fitted, "{kind} {name}: {} hypotheses", axes.len());
+                assert!(best < 15.0, "{kind} {name}: nearest hypothesis {best} deg from the axis ({axes:?})");
+            }
         }
     }
 

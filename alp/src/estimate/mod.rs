@@ -58,8 +58,6 @@ use crate::error::{Error, Result};
 pub(super) struct Probe<'a> {
     pub(super) asset: &'a ProbeAsset,
     pub(super) edges: EdgeAdjacency,
-    /// Whether mesh +Y is the probe's top (see `hypotheses::axis_hypotheses`).
-    pub(super) top_known: bool,
     /// Whether a turn about its axis changes its outline (`symmetry::turns_show`):
     /// each axis hypothesis is then fitted at several turns.
     pub(super) turns_show: bool,
@@ -69,13 +67,11 @@ pub(super) struct Probe<'a> {
 }
 
 impl<'a> Probe<'a> {
-    /// `asset` (its axis along mesh +Y) prepared; `top_known`: it was built
-    /// along +Y, so +Y is its top.
-    pub(super) fn new(asset: &'a ProbeAsset, top_known: bool, symmetry: &SymmetrySettings) -> Self {
+    /// `asset` (its axis along mesh +Y) prepared.
+    pub(super) fn new(asset: &'a ProbeAsset, symmetry: &SymmetrySettings) -> Self {
         Probe {
             asset,
             edges: EdgeAdjacency::new(&asset.mesh),
-            top_known,
             turns_show: symmetry::turns_show(&asset.mesh, symmetry),
             alike_turned: symmetry::looks_alike_turned(asset, symmetry),
         }
@@ -107,7 +103,7 @@ pub fn estimate_with_progress(
     let (to_y, along_y) = symmetry::along_y(asset, &settings.symmetry);
     let asset = along_y.as_ref().unwrap_or(asset);
     let known_pose = settings.known_pose.map(|pose| symmetry::turned_to_y(&pose, to_y));
-    let probe = Probe::new(asset, along_y.is_none(), &settings.symmetry);
+    let probe = Probe::new(asset, &settings.symmetry);
     // The photo as the estimate works on it.
     let full = photo;
     let working = WorkingPhoto::new(full, &settings.photo)?;
@@ -208,12 +204,11 @@ mod testing {
 
     use super::*;
 
-    /// The probe `asset` as the estimate holds it (its top known).
+    /// The probe `asset` as the estimate holds it.
     pub(super) fn probe_of(asset: &ProbeAsset) -> Probe<'_> {
         Probe {
             asset,
             edges: EdgeAdjacency::new(&asset.mesh),
-            top_known: true,
             turns_show: false,
             alike_turned: symmetry::looks_alike_turned(asset, &Settings::default().symmetry),
         }

@@ -116,7 +116,11 @@ fn fit_axes(ctx: &PoseContext, settings: &Settings, phases: &mut PhaseLog) -> Re
     let (probe, photo, o) = (ctx.probe, ctx.photo, &settings.orientation);
     let mesh = &probe.asset.mesh;
     let shape = hypotheses::MaskShape::new(&photo.mask)?;
-    let hypotheses = hypotheses::axis_hypotheses(&photo.camera, &shape, mesh, probe.top_known, &settings.hypotheses);
+    let grid = hypotheses::OutlineGrid::new(&photo.mask, &shape, settings.hypotheses.outline_cells);
+    let hypotheses: Vec<Vec3> = hypotheses::axis_hypotheses(&photo.camera, &shape, &grid, mesh, &settings.hypotheses)
+        .into_iter()
+        .map(|(axis, _)| axis)
+        .collect();
     // A probe whose outline a turn changes (a mug's handle) fits each axis
     // at several turns, the best kept: a fit from one turn pulls the axis
     // after a handle where the photo shows none.

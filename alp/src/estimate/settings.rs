@@ -114,8 +114,15 @@ pub struct SymmetrySettings {
 pub struct HypothesisSettings {
     /// Hypotheses within this angle (degrees) are one.
     pub same_axis_deg: f32,
-    /// A mask at most this elongated is round: its axis could point anywhere.
-    pub round_mask: f32,
+    /// Axes scored by their outline, spread over the sphere: more miss a
+    /// narrow optimum less often, at a coarse outline each (cheap).
+    pub sphere_axes: usize,
+    /// The best-scoring distinct axes fitted to the outline: more survive a
+    /// misleading coarse score, at an outline fit each (the costly part).
+    pub axes_fitted: usize,
+    /// Cells across the mask's longer side of the grid the axes are scored
+    /// on: finer tells close axes apart, at more cells per triangle.
+    pub outline_cells: usize,
     /// An axis leaning less than this (degrees) towards or away from the
     /// camera is about its own mirror twin: its twins lean `twin_lean_deg`
     /// either way instead.
@@ -323,7 +330,9 @@ impl Default for Settings {
             },
             hypotheses: HypothesisSettings {
                 same_axis_deg: 15.0,
-                round_mask: 1.15,
+                sphere_axes: 256,
+                axes_fitted: 6,
+                outline_cells: 32,
                 upright_lean_deg: 5.0,
                 twin_lean_deg: 10.0,
             },
