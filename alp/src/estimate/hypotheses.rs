@@ -185,8 +185,8 @@ pub fn sphere_of_axes(n: usize) -> Vec<Vec3> {
         .collect()
 }
 
-/// Where the probe's axis (mesh +Y) may point in the world: every axis of
-/// [`sphere_of_axes`] (`HypothesisSettings::sphere_axes`) started by
+/// Where the probe's axis (mesh +Y) may point in the world: upright and
+/// every axis of [`sphere_of_axes`] (`HypothesisSettings::sphere_axes`), each started by
 /// [`initial_pose`] and scored by its outline's cover of the mask
 /// ([`OutlineGrid::overlap`]); the best `HypothesisSettings::axes_fitted`
 /// that lie at least `same_axis_deg` apart, best first, with their scores.
@@ -200,7 +200,12 @@ pub fn axis_hypotheses(
     mesh: &Mesh,
     h: &HypothesisSettings,
 ) -> Vec<(Vec3, f32)> {
-    let mut scored: Vec<(Vec3, f32)> = sphere_of_axes(h.sphere_axes)
+    // Upright (the camera's world up) is scored beside the sphere: the
+    // likeliest single orientation for a probe at rest, which no lattice
+    // point hits exactly.
+    let mut axes = vec![camera.up.normalize()];
+    axes.extend(sphere_of_axes(h.sphere_axes));
+    let mut scored: Vec<(Vec3, f32)> = axes
         .into_par_iter()
         .map(|axis| {
             let pose = initial_pose(mesh, camera, shape, axis);
