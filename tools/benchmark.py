@@ -56,11 +56,14 @@ def run_scene(args, split, scene_dir, cache):
            "diameter_mm": meta["probe"]["diameter_mm"], "triangles": meta["probe"]["triangles"],
            "probe_px": meta["camera"]["probe_px"], "elevation_deg": meta["camera"]["elevation_deg"],
            "noise": meta["noise"], "exposure_clip": meta["exposure_clip"], "quality": args.quality,
-           "threads": args.threads, "alp_sha256": args.alp_sha[:12], "load_1m": round(os.getloadavg()[0], 2)}
+           "threads": args.threads, "alp_sha256": args.alp_sha[:12], "known_pose": args.known_pose,
+           "load_1m": round(os.getloadavg()[0], 2)}
     cmd = [args.alp, "estimate", "--image", os.path.join(scene_dir, "image.exr"),
            "--mask", os.path.join(scene_dir, "mask.png"), "--camera", os.path.join(scene_dir, "camera.json"),
            "--probe", os.path.join(scene_dir, "probe"), "--out", est_dir, "--quality", args.quality,
            "--threads", str(args.threads), "--seed", "0"]
+    if args.known_pose:
+        cmd += ["--pose", os.path.join(scene_dir, "pose.json")]
     try:
         _, wall, rss, cpu = es.run(cmd, cwd=args.out, log_path=est_dir + ".estimate.log")
         rec.update(wall_s=round(wall, 3), cpu_s=round(cpu, 3), max_rss_mb=round(rss, 1))
@@ -78,19 +81,22 @@ def stats(recs):
     return {"n": len(recs),
             "ang": [es.mean([r[s]["angular_deg"] for r in ok]) for s in ("mirror", "shiny", "diffuse")],
             "found": sum(r["success"] for r in recs), "wall_med": es.median(vals("wall_s")),
+            "speckle": es.mean([100.0 * max(r["speckle"]) for r in ok if r.get("speckle")]) if any(
+                r.get("speckle") for r in ok) else None,
             "rss_max": max(vals("max_rss_mb"), default=None)}
 
 
 def row(label, s):
     ang = " / ".join(es.fmt(a) for a in s["ang"])
     pct = 100.0 * s["found"] / s["n"] if s["n"] else 0.0
-    return "| %s | %d | %s | %d / %d (%.0f %%) | %s | %s |" % (
-        label, s["n"], ang, s["found"], s["n"], pct, es.fmt(s["wall_med"], 1), es.fmt(s["rss_max"], 0))
+    return "| %s | %d | %s | %d / %d (%.0f %%) | %s | %s | %s |" % (
+        label, s["n"], ang, s["found"], s["n"], pct, es.fmt(s["wall_med"], 1), es.fmt(s["rss_max"], 0),
+        es.fmt(s["speckle"], 2))
 
 
 def summary(records, cmdline):
     head = ("| %s | scenes | mean angular error, mirror / shiny / diffuse (deg) | poses found | "
-            "median wall (s) | peak RSS (MB) |\n|---|---|---|---|---|---|")
+            "median wall (s) | peak RSS (MB) | speckle (%%) |\n|---|---|---|---|---|---|---|")
     lines = ["# Benchmark: `alp estimate` on the train and test splits", "", "`%s`" % cmdline, ""]
     splits = [s for s in ("train", "test") if any(r["split"] == s for r in records)]
     by = {s: [r for r in records if r["split"] == s] for s in splits}
@@ -98,7 +104,7 @@ def summary(records, cmdline):
     if len(splits) == 2:
         tr, te = stats(by["train"]), stats(by["test"])
         gap = ["-" if a is None or b is None else "%+.2f" % (b - a) for a, b in zip(tr["ang"], te["ang"])]
-        lines.append("| gap (test - train) | | %s | %+.0f points | | |" % (
+        lines.append("| gap (test - train) | | %s | %+.0f points | | | |" % (
             " / ".join(gap), 100.0 * (te["found"] / te["n"] - tr["found"] / tr["n"])))
     for key, title in (("family", "probe family"), ("pose_kind", "pose kind"), ("lighting", "lighting")):
         for s in splits:
@@ -126,6 +132,8 @@ def main():
     ap.add_argument("--out", default=None, help="results folder (default BENCH/results/QUALITY)")
     ap.add_argument("--only", default="", help="keep scenes whose name contains one of these (comma-separated)")
     ap.add_argument("--eval-spp", type=int, default=256, help="alp eval --spp")
+    ap.add_argument("--known-pose", action="store_true",
+                    help="give the estimate each scene's true pose (pose.json): the lighting alone is measured")
     args = ap.parse_args()
     es.RSS_VIA = "auto"
     args.alp = os.path.abspath(args.alp)
@@ -139,7 +147,8 @@ def main():
         with open(results) as f:
             for line in f:
                 r = json.loads(line)
-                if r["alp_sha256"] == args.alp_sha[:12] and r["quality"] == args.quality:
+                if (r["alp_sha256"], r["quality"], r.get("known_pose", False)) == (
+                        args.alp_sha[:12], args.quality, args.known_pose):
                     kept[(r["split"], r["scene"])] = r
     cache_path = os.path.join(args.out, "eval_cache.json")
     cache = json.load(open(cache_path)) if os.path.exists(cache_path) else {}

@@ -145,6 +145,52 @@ pub fn relighting_errors(
     Ok(compare_spheres(&est, &gt, &evaluation_region()))
 }
 
+/// A texel counts as speckle when one of its channels is more than this
+/// many times the third brightest of its eight neighbours' (plus
+/// [`SPECKLE_FLOOR`]): fewer than three neighbours come near it.
+pub const SPECKLE_RATIO: f32 = 4.0;
+
+/// A fraction of the channel's mean radiance added to the neighbourhood's
+/// level: a texel a little above a black neighbourhood is no speckle.
+pub const SPECKLE_FLOOR: f32 = 0.05;
+
+/// The share of an env map's texels, per channel, that stand alone above
+/// their neighbourhood: brighter than [`SPECKLE_RATIO`] times the third
+/// brightest of their eight neighbours (longitude wraps; rows end at the
+/// poles) plus [`SPECKLE_FLOOR`] of the channel's mean. Noise a solve
+/// fitted where the photo tells little shows as speckle; a true map has
+/// little (a sun covers a few texels, and they are neighbours).
+pub fn speckle(env: &EnvMap) -> [f64; 3] {
+    let (w, h) = (env.width(), env.height());
+    let texels = env.radiance();
+    std::array::from_fn(|c| {
+        let mean = texels.iter().map(|t| t[c] as f64).sum::<f64>() / texels.len() as f64;
+        let floor = SPECKLE_FLOOR * mean as f32;
+        let mut alone = 0usize;
+        let mut around = Vec::with_capacity(8);
+        for r in 0..h {
+            for col in 0..w {
+                around.clear();
+                for dr in -1i64..=1 {
+                    for dc in -1i64..=1 {
+                        let rr = r as i64 + dr;
+                        if (dr, dc) == (0, 0) || rr < 0 || rr >= h as i64 {
+                            continue;
+                        }
+                        let cc = (col as i64 + dc).rem_euclid(w as i64) as usize;
+                        around.push(texels[rr as usize * w + cc][c]);
+                    }
+                }
+                around.sort_by(|a, b| b.total_cmp(a));
+                if texels[r * w + col][c] > SPECKLE_RATIO * (around[2] + floor) {
+                    alone += 1;
+                }
+            }
+        }
+        alone as f64 / texels.len() as f64
+    })
+}
+
 /// How far an estimated pose is from the true one.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct PoseErrors {
@@ -192,6 +238,8 @@ pub struct EvalReport {
     pub shiny: SphereErrors,
     /// Errors of the diffuse sphere.
     pub diffuse: SphereErrors,
+    /// The estimated map's speckle per channel ([`speckle`]).
+    pub speckle: [f64; 3],
     /// Pose errors, when an estimated pose was given.
     #[serde(flatten)]
     pub pose: Option<PoseErrors>,
@@ -255,6 +303,7 @@ pub fn evaluate_scene(
         mirror,
         shiny,
         diffuse,
+        speckle: speckle(estimate),
         pose,
     })
 }
@@ -296,6 +345,28 @@ mod tests {
     }
 
     #[test]
+    fn speckle_counts_texels_that_stand_alone_in_a_channel_not_a_patch_or_a_gradient() {
+        let (w, h) = (16, 8);
+        let smooth: Vec<[f32; 3]> = (0..w * h).map(|i| [1.0 + (i % w) as f32 * 0.1, 1.0, 1.0]).collect();
+        let env = EnvMap::new(w, h, smooth.clone()).unwrap();
+        assert_eq!(speckle(&env), [0.0; 3]);
+        // One texel 10 times its neighbours in green, at the seam.
+        let mut spotted = smooth.clone();
+        spotted[3 * w][1] = 10.0;
+        let share = speckle(&EnvMap::new(w, h, spotted).unwrap());
+        assert_eq!(share, [0.0, 1.0 / (w * h) as f64, 0.0]);
+        // A bright 2x2 patch (a sun) is no speckle: each texel has three
+        // bright neighbours.
+        let mut sun = smooth;
+        for r in 2..4 {
+            for c in 5..7 {
+                sun[r * w + c] = [50.0; 3];
+            }
+        }
+        assert_eq!(speckle(&EnvMap::new(w, h, sun).unwrap()), [0.0; 3]);
+    }
+
+    #[test]
     fn report_fields_are_the_contract() {
         let errors = SphereErrors {
             angular_deg: 1.0,
@@ -306,11 +377,12 @@ mod tests {
             mirror: errors,
             shiny: errors,
             diffuse: errors,
+            speckle: [0.25, 0.0, 0.5],
             pose: None,
         };
         assert_eq!(
             report.to_json_line(),
-            r#"{"scene":"s","mirror":{"angular_deg":1.0,"si_rmse":0.5},"shiny":{"angular_deg":1.0,"si_rmse":0.5},"diffuse":{"angular_deg":1.0,"si_rmse":0.5}}"#
+            r#"{"scene":"s","mirror":{"angular_deg":1.0,"si_rmse":0.5},"shiny":{"angular_deg":1.0,"si_rmse":0.5},"diffuse":{"angular_deg":1.0,"si_rmse":0.5},"speckle":[0.25,0.0,0.5]}"#
         );
         report.pose = Some(PoseErrors {
             rotation_deg: 1.0,

@@ -428,10 +428,11 @@ impl Transport {
         total
     }
 
-    /// Per texel and channel, `sum_p weight_p a_pt^2`: the data term's
-    /// curvature along that unknown (texel-major RGB).
-    pub fn weighted_column_norms(&self, weight: &[f64]) -> Vec<f64> {
-        self.texel_sums(|p, w| w.map(|w| weight[p] * w * w))
+    /// Per texel and channel, `sum_p weight_pc a_ptc^2`: the data term's
+    /// curvature along that unknown (texel-major RGB), each pixel weighted
+    /// per channel.
+    pub fn weighted_column_norms(&self, weight: &[[f64; 3]]) -> Vec<f64> {
+        self.texel_sums(|p, w| std::array::from_fn(|c| weight[p][c] * w[c] * w[c]))
     }
 
     /// How strongly each texel reaches the pixels (the summed luminance of

@@ -428,7 +428,7 @@ impl Ranker<'_> {
             silhouette_loss: loss,
             refitted: refit.is_some(),
             psnr_db: coarse.psnr_db(),
-            rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.target, &coarse.weight),
+            rgb_angle_deg: mean_rgb_angle_deg(&coarse.rendered, &coarse.data.target, &coarse.data.weight),
             relative_error: coarse.weighted_sq_error(),
         };
         Ok((refit, ranking, account, pose))

@@ -167,11 +167,17 @@ pub(super) fn clipped_pixels(photo: &Photo, settings: &PhotoSettings) -> Vec<boo
     clipped
 }
 
-/// Whether pixel `p` (covered by the probe to `coverage`) is data: inside
-/// the photo's mask, wholly on the probe (a partly covered pixel mixes in
-/// the background) and not clipped.
+/// Whether pixel `p` (covered by the probe to `coverage`) is data: on the
+/// probe ([`on_probe`]) and not clipped.
 pub(super) fn usable_pixel(photo: &Photo, clipped: &[bool], p: u32, coverage: f32) -> bool {
-    photo.mask.inside[p as usize] && coverage >= 1.0 && !clipped[p as usize]
+    on_probe(photo, p, coverage) && !clipped[p as usize]
+}
+
+/// Whether pixel `p` (covered by the probe to `coverage`) is inside the
+/// photo's mask and wholly on the probe (a partly covered pixel mixes in
+/// the background).
+pub(super) fn on_probe(photo: &Photo, p: u32, coverage: f32) -> bool {
+    photo.mask.inside[p as usize] && coverage >= 1.0
 }
 
 /// Which of the probe's pixels a lighting fit reads.

@@ -32,10 +32,10 @@ pub(super) fn renders_alike(a: &StartReport, b: &StartReport, o: &OrientationSet
 /// data pixels: the probe's colour pattern (a label) in the right place or
 /// not, whatever detail of the lighting a coarse map leaves unexplained
 /// (which moves intensity far more than hue).
-pub(super) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[f64]) -> f64 {
+pub(super) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[[f64; 3]]) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
-    for ((r, t), &w) in rendered.iter().zip(target).zip(weight) {
-        if w > 0.0 {
+    for ((r, t), w) in rendered.iter().zip(target).zip(weight) {
+        if w.iter().any(|&w| w > 0.0) {
             let f = |v: &[f64; 3]| v.map(|x| x as f32);
             sum += crate::eval::rgb_angle_deg(f(r), f(t));
             n += 1;

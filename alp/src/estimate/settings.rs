@@ -370,6 +370,8 @@ impl Default for Settings {
                 final_smoothness: Smoothness {
                     weight: 1e-3,
                     edge: 0.05,
+                    chroma: 1.0,
+                    edge_evidence: 0.0,
                 },
                 floor_of_level: 0.02,
                 edge_contrast: 0.15,

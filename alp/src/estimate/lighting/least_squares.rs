@@ -20,6 +20,45 @@ pub fn pyramid(size: (usize, usize), coarsest: usize) -> Vec<(usize, usize)> {
     heights.into_iter().map(|h| (2 * h, h)).collect()
 }
 
+/// The photo as a lighting solve reads it, per data pixel: the target
+/// radiance, the weight per channel, and whether the target is a lower
+/// bound only (a pixel the sensor clipped: its radiance is at least the
+/// clipping level, and a re-render above it is no error).
+#[derive(Clone, Debug, Default)]
+pub struct DataTerm {
+    pub target: Vec<[f64; 3]>,
+    pub weight: Vec<[f64; 3]>,
+    pub at_least: Vec<bool>,
+}
+
+impl DataTerm {
+    /// The residual of pixel `p`'s channel `c` rendered as `value`: zero
+    /// above a lower bound.
+    #[inline]
+    pub fn residual(&self, p: usize, c: usize, value: f64) -> f64 {
+        let r = value - self.target[p][c];
+        match self.at_least[p] && r > 0.0 {
+            true => 0.0,
+            false => r,
+        }
+    }
+
+    /// Targets met exactly (no bound), with their weights.
+    pub fn exact(target: Vec<[f64; 3]>, weight: Vec<[f64; 3]>) -> Self {
+        let at_least = vec![false; target.len()];
+        DataTerm {
+            target,
+            weight,
+            at_least,
+        }
+    }
+
+    /// Whether pixel `p` weighs in any channel.
+    pub fn used(&self, p: usize) -> bool {
+        self.weight[p].iter().any(|&w| w > 0.0)
+    }
+}
+
 /// The smoothness prior of a lighting solve: neighbouring texels'
 /// differences, penalised quadratically up to `edge` and linearly beyond.
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -34,12 +73,39 @@ pub struct Smoothness {
     /// keep their edge in one place instead of fringing in colour).
     /// 0: quadratic at every difference.
     pub edge: f64,
+    /// The weight of a difference's chromatic part (its channels'
+    /// departure from their mean) against its grey part: above 1, colour
+    /// varies more slowly over the map than brightness, as in real scenes,
+    /// so a direction whose colour the photo hardly shows (seen through a
+    /// red label, its green and blue dim) takes its neighbours' colour
+    /// instead of fitting noise. 1: the channels apart.
+    pub chroma: f64,
+    /// How much the photo must tell of two texels for an edge between
+    /// them to stay sharp: a pair's edge grows by `1 + edge_evidence / r`
+    /// in square, `r` the lesser of its texels' data curvature over their
+    /// prior curvature. Where the photo tells little (a direction seen
+    /// through a rough or dark region, or by a few pixels), the penalty
+    /// stays quadratic and the map smooth, instead of keeping the steps
+    /// and single bright texels that noise drew there. 0: one edge
+    /// everywhere.
+    pub edge_evidence: f64,
 }
 
 impl Smoothness {
-    /// Quadratic smoothness of `weight`.
+    /// Quadratic smoothness of `weight`, the channels apart.
     pub fn quadratic(weight: f64) -> Self {
-        Smoothness { weight, edge: 0.0 }
+        Smoothness {
+            weight,
+            edge: 0.0,
+            chroma: 1.0,
+            edge_evidence: 0.0,
+        }
+    }
+
+    /// The curvature of a neighbour pair's penalty in one channel of one
+    /// texel, per unit of `lambda area q`, at small differences.
+    fn channel_curvature(&self) -> f64 {
+        (2.0 + 4.0 * self.chroma) / 3.0
     }
 }
 
@@ -69,7 +135,7 @@ pub(super) const DARK_LEVEL: f64 = 0.05;
 /// than the probe's lobes resolve).
 pub const FLOOR_OF_LEVEL: f64 = 0.02;
 
-/// Solves `min_x>=0 sum_p w_p |A x - b_p|^2 / sum w + lambda R(x)` where
+/// Solves `min_x>=0 sum_pc w_pc (A x - b)_pc^2 / (sum w / 3) + lambda R(x)` where
 /// `R` penalises squared differences of neighbouring texels (area-weighted,
 /// relative to the local level of the start `x0`, divided by the
 /// target's mean square so that `lambda` is scale-free, and growing only
@@ -78,21 +144,18 @@ pub const FLOOR_OF_LEVEL: f64 = 0.02;
 /// `floor_of_level` times that level.
 /// An error only where L-BFGS refuses its inputs; a solve that stops short
 /// of convergence says how in [`Solved::termination`].
-pub fn solve(
-    transport: &Transport,
-    target: &[[f64; 3]],
-    weight: &[f64],
-    settings: LightingSolve,
-    x0: &[f64],
-) -> Result<Solved> {
+pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0: &[f64]) -> Result<Solved> {
+    let (target, weight) = (&data.target, &data.weight);
     let (w, h) = (transport.width, transport.height);
     assert_eq!(target.len(), transport.pixels, "solve: one target per pixel");
     assert_eq!(x0.len(), transport.unknowns(), "solve: the start has the wrong size");
-    let weight_sum: f64 = weight.iter().sum::<f64>().max(1e-30);
+    // Normalised by the mean weight over pixels and channels: the same as
+    // a per-pixel weight's sum when the channels weigh alike.
+    let weight_sum: f64 = weight.iter().flatten().sum::<f64>().max(1e-30) / 3.0;
     let mean_sq = target
         .iter()
         .zip(weight)
-        .map(|(t, &wt)| wt * (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) / 3.0)
+        .map(|(t, wt)| (0..3).map(|c| wt[c] * t[c] * t[c]).sum::<f64>() / 3.0)
         .sum::<f64>()
         / weight_sum;
     let lambda = settings.smoothness.weight / mean_sq.max(1e-30) / (w * h) as f64;
@@ -117,44 +180,52 @@ pub fn solve(
         let area = (std::f64::consts::PI * (r as f64 + 0.5) / h as f64).sin();
         for c in 0..w {
             let i = r * w + c;
-            let j = r * w + (c + 1) % w;
-            pairs.push(Pair {
-                i,
-                j,
-                area,
-                relative: relative(i, j),
-            });
-            if r + 1 < h {
-                let j = (r + 1) * w + c;
+            let below = (r + 1 < h).then_some((r + 1) * w + c);
+            for j in std::iter::once(r * w + (c + 1) % w).chain(below) {
                 pairs.push(Pair {
                     i,
                     j,
                     area,
                     relative: relative(i, j),
+                    edge_sq: 0.0,
                 });
             }
         }
     }
+    // The data term's curvature per unknown, and the prior's per texel (at
+    // small differences; alike in every channel).
+    let data_curvature: Vec<f64> = transport
+        .weighted_column_norms(weight)
+        .iter()
+        .map(|h| 2.0 * h / weight_sum)
+        .collect();
+    let pair_curvature = settings.smoothness.channel_curvature();
+    let mut prior_curvature = vec![0.0; w * h];
+    for p in &pairs {
+        prior_curvature[p.i] += pair_curvature * lambda * p.area * p.relative;
+        prior_curvature[p.j] += pair_curvature * lambda * p.area * p.relative;
+    }
+    // Each pair's edge: wider where the photo tells less than the prior.
+    let edge_sq = (settings.smoothness.edge * (mean_level + floor)).powi(2);
+    let told = |t: usize| data_curvature[3 * t..3 * t + 3].iter().sum::<f64>() / 3.0 / prior_curvature[t].max(1e-300);
+    for p in &mut pairs {
+        let evidence = told(p.i).min(told(p.j)).max(1e-12);
+        p.edge_sq = edge_sq * (1.0 + settings.smoothness.edge_evidence / evidence);
+    }
     let prior = Prior {
         pairs,
         lambda,
-        edge_sq: (settings.smoothness.edge * (mean_level + floor)).powi(2),
+        chroma: settings.smoothness.chroma,
     };
     // Jacobi preconditioning, x = s * y with s = 1 / sqrt(diag of the
     // Hessian): a texel that a thousand pixels see and one only the
     // smoothness reaches differ in curvature by orders of magnitude, and
     // L-BFGS on x crawls along the flat ones. Bounds stay y >= 0.
-    let mut curvature: Vec<f64> = transport
-        .weighted_column_norms(weight)
+    let curvature: Vec<f64> = data_curvature
         .iter()
-        .map(|h| 2.0 * h / weight_sum)
+        .enumerate()
+        .map(|(k, d)| d + prior_curvature[k / 3])
         .collect();
-    for p in &prior.pairs {
-        for c in 0..3 {
-            curvature[p.i * 3 + c] += 2.0 * lambda * p.area * p.relative;
-            curvature[p.j * 3 + c] += 2.0 * lambda * p.area * p.relative;
-        }
-    }
     let scale: Vec<f64> = curvature.iter().map(|&h| 1.0 / h.max(1e-300).sqrt()).collect();
     let mut x = vec![0.0; transport.unknowns()];
     let mut rendered = vec![[0.0; 3]; transport.pixels];
@@ -165,7 +236,7 @@ pub fn solve(
         g.iter_mut().for_each(|v| *v = 0.0);
         transport.apply_and_pull_back(
             x,
-            |p, px| std::array::from_fn(|c| 2.0 * weight[p] * (px[c] - target[p][c]) / weight_sum),
+            |p, px| std::array::from_fn(|c| 2.0 * weight[p][c] * data.residual(p, c, px[c]) / weight_sum),
             &mut rendered,
             g,
             &mut scratch,
@@ -173,8 +244,7 @@ pub fn solve(
         let mut f = 0.0;
         for p in 0..transport.pixels {
             for c in 0..3 {
-                let r = rendered[p][c] - target[p][c];
-                f += weight[p] * r * r;
+                f += weight[p][c] * data.residual(p, c, rendered[p][c]).powi(2);
             }
         }
         f /= weight_sum;
@@ -220,41 +290,48 @@ pub struct Solved {
     pub termination: Option<Termination>,
 }
 
-/// Two neighbouring texels, the area weight of their difference and the
-/// factor that makes it relative to their local level.
+/// Two neighbouring texels, the area weight of their difference, the
+/// factor that makes it relative to their local level, and its edge.
 pub(super) struct Pair {
     pub(super) i: usize,
     pub(super) j: usize,
     pub(super) area: f64,
     pub(super) relative: f64,
+    /// The squared difference (of the pair's relative difference) past
+    /// which the penalty turns linear; 0: quadratic.
+    pub(super) edge_sq: f64,
 }
 
 /// The smoothness prior over an env map's neighbour pairs.
 pub(super) struct Prior {
     pub(super) pairs: Vec<Pair>,
     pub(super) lambda: f64,
-    /// The squared difference (of a pair's relative difference `q |d|^2`)
-    /// past which the penalty turns linear: the smoothness's edge times the
-    /// start's mean level (plus its dark floor), squared; 0: quadratic.
-    pub(super) edge_sq: f64,
+    /// The weight of a difference's chromatic part ([`Smoothness::chroma`]).
+    pub(super) chroma: f64,
 }
 
 impl Prior {
     /// Returns the prior's value at the env map `x` (texel-major RGB) and
-    /// adds its gradient to `g`. A pair's penalty is `lambda area q |d|^2`
-    /// (`q` its relative factor, `d` its RGB difference) while that is
-    /// small against `3 edge^2`, and `lambda area 6 edge^2 (sqrt(1 + q
-    /// |d|^2 / (3 edge^2)) - 1)` in general: the same at small
-    /// differences, linear in `|d|` at large ones.
+    /// adds its gradient to `g`. A pair's penalty is `lambda area s` with
+    /// `s = q (3 m^2 + chroma |d - m|^2)` (`q` its relative factor, `d` its
+    /// RGB difference, `m` the mean of `d`'s channels: `s = q |d|^2` at
+    /// `chroma` 1) while that is small against `3 edge^2` (the pair's),
+    /// and `lambda area 6 edge^2 (sqrt(1 + s / (3 edge^2)) - 1)` in
+    /// general: the same at small differences, linear in `sqrt(s)` at
+    /// large ones.
     pub(super) fn add_value_and_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
         let mut f = 0.0;
         for p in &self.pairs {
             let d: [f64; 3] = std::array::from_fn(|c| x[p.i * 3 + c] - x[p.j * 3 + c]);
-            let sq = p.relative * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-            let slope = match self.edge_sq > 0.0 {
+            let m = (d[0] + d[1] + d[2]) / 3.0;
+            let chromatic = (d[0] - m).powi(2) + (d[1] - m).powi(2) + (d[2] - m).powi(2);
+            let sq = p.relative * (3.0 * m * m + self.chroma * chromatic);
+            let slope = match p.edge_sq > 0.0 {
                 true => {
-                    let root = (1.0 + sq / (3.0 * self.edge_sq)).sqrt();
-                    f += self.lambda * p.area * 6.0 * self.edge_sq * (root - 1.0);
+                    let root = (1.0 + sq / (3.0 * p.edge_sq)).sqrt();
+                    // 6 edge^2 (root - 1), without the cancellation of a
+                    // wide edge's root near 1.
+                    f += self.lambda * p.area * 2.0 * sq / (root + 1.0);
                     1.0 / root
                 }
                 false => {
@@ -263,7 +340,7 @@ impl Prior {
                 }
             };
             for c in 0..3 {
-                let dg = 2.0 * self.lambda * p.area * p.relative * slope * d[c];
+                let dg = 2.0 * self.lambda * p.area * p.relative * slope * (m + self.chroma * (d[c] - m));
                 g[p.i * 3 + c] += dg;
                 g[p.j * 3 + c] -= dg;
             }
@@ -293,8 +370,7 @@ mod tests {
         transport.apply(&truth, &mut target);
         let solved = solve(
             &transport,
-            &target,
-            &vec![1.0; uv.len()],
+            &DataTerm::exact(target.clone(), vec![[1.0; 3]; uv.len()]),
             LightingSolve {
                 smoothness: Smoothness::quadratic(0.0),
                 relative_smoothness: false,
@@ -308,6 +384,40 @@ mod tests {
         for (a, b) in solved.env.iter().zip(&truth) {
             assert!((a - b).abs() < 1e-3, "{a} vs {b}");
         }
+    }
+
+    #[test]
+    fn a_clipped_pixel_bounds_its_texel_from_below_only() {
+        // Each pixel reads one texel; texel 9's true radiance is 5, but its
+        // pixel was clipped at 2. As a target the clip pulls the texel down
+        // to 2; as a lower bound it leaves the texel wherever the rest
+        // puts it (here, the start's 5), and pushes a texel below the
+        // bound up to at least it.
+        let (w, h) = (8, 4);
+        let uv: Vec<Vec2> = (0..w * h)
+            .map(|t| Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32))
+            .collect();
+        let segment: Vec<u32> = (0..uv.len() as u32).collect();
+        let transport = Transport::new(&segment, &uv, &vec![[1.0; 3]; uv.len()], uv.len(), w, h);
+        let mut target = vec![[1.0; 3]; uv.len()];
+        target[9] = [2.0; 3];
+        let texel_9 = |at_least: bool, start: f64| {
+            let mut data = DataTerm::exact(target.clone(), vec![[1.0; 3]; uv.len()]);
+            data.at_least[9] = at_least;
+            let mut x0 = vec![1.0; w * h * 3];
+            x0[27..30].iter_mut().for_each(|v| *v = start);
+            let settings = LightingSolve {
+                smoothness: Smoothness::quadratic(0.0),
+                relative_smoothness: false,
+                floor_of_level: 0.0,
+                max_iters: 200,
+            };
+            solve(&transport, &data, settings, &x0).expect("a solve").env[27]
+        };
+        assert!((texel_9(false, 5.0) - 2.0).abs() < 1e-3, "a target: {}", texel_9(false, 5.0));
+        assert!((texel_9(true, 5.0) - 5.0).abs() < 1e-3, "a bound: {}", texel_9(true, 5.0));
+        // (Anywhere at or above the bound costs nothing.)
+        assert!(texel_9(true, 0.5) > 2.0 - 1e-3, "raised: {}", texel_9(true, 0.5));
     }
 
     #[test]
@@ -332,8 +442,7 @@ mod tests {
             };
             let x = solve(
                 &transport,
-                &target,
-                &vec![1.0; uv.len()],
+                &DataTerm::exact(target.clone(), vec![[1.0; 3]; uv.len()]),
                 settings,
                 &vec![1.0; w * h * 3],
             )
@@ -361,17 +470,28 @@ mod tests {
                 j,
                 area: 0.2 + 0.1 * (i % 4) as f64,
                 relative: 0.5 + (i % 3) as f64,
+                edge_sq: 0.0,
             });
         }
         // Quadratic, and with two edges: the pairs' `q |d|^2 / (3 edge^2)`
         // runs from 0.005 to 0.9 with the first (near-quadratic pairs to the
         // bend) and from 0.5 to 90 with the second (the bend to far into
         // the linear part).
-        for edge_sq in [0.0, 5.0, 0.05] {
+        // Each with the channels apart and with colour 8 times stiffer; and
+        // with each pair's edge of its own, from near-quadratic (1e9) to
+        // far past the bend.
+        let cases = [0.0, 5.0, 0.05].into_iter().flat_map(|e| [(e, 1.0), (e, 8.0)]);
+        for (edge_sq, chroma) in cases.chain([(-1.0, 8.0)]) {
+            for (k, p) in pairs.iter_mut().enumerate() {
+                p.edge_sq = match edge_sq < 0.0 {
+                    true => [1e9, 5.0, 0.05][k % 3],
+                    false => edge_sq,
+                };
+            }
             let prior = Prior {
                 pairs: std::mem::take(&mut pairs),
                 lambda: 0.7,
-                edge_sq,
+                chroma,
             };
             let mut g = vec![0.0; x.len()];
             prior.add_value_and_gradient(&x, &mut g);
@@ -385,7 +505,7 @@ mod tests {
                 let fd = (at(h_step) - at(-h_step)) / (2.0 * h_step);
                 assert!(
                     (fd - g[k]).abs() < 1e-6 * fd.abs().max(1.0),
-                    "edge^2 {edge_sq}, x[{k}]: {} vs {fd}",
+                    "edge^2 {edge_sq}, chroma {chroma}, x[{k}]: {} vs {fd}",
                     g[k]
                 );
             }
@@ -420,12 +540,15 @@ mod tests {
         transport.apply(&truth, &mut target);
         let error = |edge: f64| {
             let settings = LightingSolve {
-                smoothness: Smoothness { weight: 0.3, edge },
+                smoothness: Smoothness {
+                    edge,
+                    ..Smoothness::quadratic(0.3)
+                },
                 relative_smoothness: false,
                 floor_of_level: 0.0,
                 max_iters: 2000,
             };
-            let x = solve(&transport, &target, &vec![1.0; w * h], settings, &vec![2.0; w * h * 3])
+            let x = solve(&transport, &DataTerm::exact(target.clone(), vec![[1.0; 3]; w * h]), settings, &vec![2.0; w * h * 3])
                 .expect("a solve")
                 .env;
             (x.iter().zip(&truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / x.len() as f64).sqrt()

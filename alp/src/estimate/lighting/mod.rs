@@ -19,11 +19,11 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
-pub use least_squares::{LightingSolve, Smoothness, Solved, pyramid, solve};
+pub use least_squares::{DataTerm, LightingSolve, Smoothness, Solved, pyramid, solve};
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
 
 use super::Probe;
-use super::photo::{Photo, Pixels, usable_pixel};
+use super::photo::{Photo, Pixels, on_probe};
 use super::report::{PhaseReport, resident_mb};
 use super::settings::{LightingSettings, Settings};
 use crate::error::{Error, Result};
@@ -54,8 +54,7 @@ pub(super) struct LightingFit {
     pub(super) transport: Transport,
     pub(super) env: Vec<f64>,
     pub(super) rendered: Vec<[f64; 3]>,
-    pub(super) target: Vec<[f64; 3]>,
-    pub(super) weight: Vec<f64>,
+    pub(super) data: DataTerm,
     pub(super) evaluations: usize,
     /// Why the (finest level's) solve stopped.
     pub(super) termination: Option<Termination>,
@@ -64,7 +63,7 @@ pub(super) struct LightingFit {
 impl LightingFit {
     /// The re-render's PSNR over the data pixels.
     pub(super) fn psnr_db(&self) -> f64 {
-        psnr(&self.rendered, &self.target, &self.weight)
+        psnr(&self.rendered, &self.data)
     }
 
     /// The solved map, the rest dropped.
@@ -76,7 +75,7 @@ impl LightingFit {
     /// squared error over the pixels of non-zero weight (with the search's
     /// weights, the mean relative squared error).
     pub(super) fn weighted_sq_error(&self) -> f64 {
-        mean_weighted_sq_error(&self.rendered, &self.target, &self.weight)
+        mean_weighted_sq_error(&self.rendered, &self.data)
     }
 
     /// The solved map and the sampling confidence (grey) at the output
@@ -229,17 +228,20 @@ pub(super) fn fit_lighting(
     let camera = &photo.camera;
     let keep = |p: u32| pixels.keeps(p, camera.width);
     let record = SampleRecord::trace(probe.asset, pose, camera, settings, sampling, passes, keep)?;
-    let (target, mut weight) = pixel_targets(photo, &record.hits, clipped, purpose)?;
+    let mut data = pixel_targets(photo, &record.hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
         let r = &record;
         let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());
         let edges = albedo_edges(r, &shares.direct, pixels, lighting);
-        weight
+        data.weight
             .iter_mut()
             .zip(&edges)
             .filter(|(_, e)| **e)
-            .for_each(|(w, _)| *w = 0.0);
-        weight.iter_mut().zip(&shares.followed).for_each(|(w, f)| *w *= f * f);
+            .for_each(|(w, _)| *w = [0.0; 3]);
+        data.weight
+            .iter_mut()
+            .zip(&shares.followed)
+            .for_each(|(w, f)| w.iter_mut().for_each(|w| *w *= f * f));
     }
     let solve_settings = LightingSolve {
         smoothness,
@@ -254,18 +256,19 @@ pub(super) fn fit_lighting(
     let (transport, solved) = match start {
         Some(x0) => {
             let transport = at(size);
-            let solved = solve(&transport, &target, &weight, solve_settings, x0)?;
+            let solved = solve(&transport, &data, solve_settings, x0)?;
             (transport, solved)
         }
         None => {
             // Coarse to fine from a constant map at the photo's mean level:
             // each level starts from the one below, which also sets the
             // local radiance level its smoothness is relative to.
-            let wsum: f64 = weight.iter().sum::<f64>().max(1e-30);
-            let mean = target
+            let wsum: f64 = data.weight.iter().flatten().sum::<f64>().max(1e-30);
+            let mean = data
+                .target
                 .iter()
-                .zip(&weight)
-                .map(|(t, w)| w * (t[0] + t[1] + t[2]) / 3.0)
+                .zip(&data.weight)
+                .map(|(t, w)| (0..3).map(|c| w[c] * t[c]).sum::<f64>())
                 .sum::<f64>()
                 / wsum;
             let levels = pyramid(size, lighting.coarsest_height);
@@ -290,7 +293,7 @@ pub(super) fn fit_lighting(
                     },
                     ..solve_settings
                 };
-                (solved, previous, transport) = (solve(&t, &target, &weight, level_settings, &x0)?, level, Some(t));
+                (solved, previous, transport) = (solve(&t, &data, level_settings, &x0)?, level, Some(t));
                 evaluations += solved.evaluations;
             }
             solved.evaluations = evaluations;
@@ -309,22 +312,29 @@ pub(super) fn fit_lighting(
         transport,
         env,
         rendered,
-        target,
-        weight,
+        data,
         evaluations,
         termination,
     })
 }
 
-/// Per-pixel data term weights for `purpose`, zero outside the mask, on
-/// partly covered pixels and on clipped ones. Returns the weights and
-/// targets aligned with `hits.pixels`.
+/// The data term for `purpose`, aligned with `hits.pixels`: each pixel's
+/// radiance, its weight per channel, and whether it is a lower bound. A
+/// weight is the inverse square of the pixel's level (plus a dark floor):
+/// by its luminance for the searches, by each channel's own value (capped
+/// at the mask's mean level) for the output map -- a photo's error grows
+/// with its level per channel, so a red label's dim green and blue are
+/// measured as closely, in proportion, as its bright red, and count as
+/// much. Zero outside the mask and on partly covered pixels. A clipped
+/// pixel is left out of the searches; the output map reads it as a lower
+/// bound (the light it reflects is at least the clipping level: how far
+/// a sun's highlight stays clipped tells how bright the sun is).
 pub(super) fn pixel_targets(
     photo: &Photo,
     hits: &PrimaryHits,
     clipped: &[bool],
     purpose: LightingPurpose,
-) -> Result<(Vec<[f64; 3]>, Vec<f64>)> {
+) -> Result<DataTerm> {
     // The relative L1 term's scale (objective::RgbL1), squared for least squares.
     let level = mask_mean_luminance(&photo.image, &photo.mask)?;
     let eps = DARK_FRACTION * level;
@@ -332,20 +342,22 @@ pub(super) fn pixel_targets(
         LightingPurpose::Search => f64::INFINITY,
         LightingPurpose::Output => level,
     };
-    Ok(hits
-        .pixels
-        .iter()
-        .zip(&hits.coverage)
-        .map(|(&p, &c)| {
-            let px = photo.image.pixels[p as usize].map(|v| v as f64);
-            let w = if usable_pixel(photo, clipped, p, c) {
-                1.0 / (luminance(px).min(cap) + eps).powi(2)
-            } else {
-                0.0
-            };
-            (px, w)
-        })
-        .unzip())
+    let relative = |level: f64| 1.0 / (level.min(cap) + eps).powi(2);
+    let mut data = DataTerm::default();
+    for (&p, &c) in hits.pixels.iter().zip(&hits.coverage) {
+        let px = photo.image.pixels[p as usize].map(|v| v as f64);
+        let at_least = clipped[p as usize];
+        let w = match (purpose, at_least) {
+            (LightingPurpose::Search, true) => [0.0; 3],
+            _ if !on_probe(photo, p, c) => [0.0; 3],
+            (LightingPurpose::Search, false) => [relative(luminance(px)); 3],
+            (LightingPurpose::Output, _) => px.map(relative),
+        };
+        data.target.push(px);
+        data.weight.push(w);
+        data.at_least.push(at_least);
+    }
+    Ok(data)
 }
 
 /// Pixels on an edge of the probe's reflectance (its albedo or roughness
@@ -439,11 +451,12 @@ impl LitShares {
 
 /// The weighted mean squared error over weighted pixels (per channel): with
 /// the search's weights, the mean relative squared error.
-pub(super) fn mean_weighted_sq_error(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[f64]) -> f64 {
+pub(super) fn mean_weighted_sq_error(rendered: &[[f64; 3]], data: &DataTerm) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
-    for ((r, t), &w) in rendered.iter().zip(target).zip(weight) {
-        if w > 0.0 {
-            sum += w * (0..3).map(|c| (r[c] - t[c]).powi(2)).sum::<f64>() / 3.0;
+    for (p, r) in rendered.iter().enumerate() {
+        if data.used(p) {
+            let w = data.weight[p];
+            sum += (0..3).map(|c| w[c] * data.residual(p, c, r[c]).powi(2)).sum::<f64>() / 3.0;
             n += 1;
         }
     }
@@ -452,13 +465,13 @@ pub(super) fn mean_weighted_sq_error(rendered: &[[f64; 3]], target: &[[f64; 3]],
 
 /// PSNR (dB) of `rendered` against `target` over weighted pixels, with the
 /// target's peak as the signal.
-pub(super) fn psnr(rendered: &[[f64; 3]], target: &[[f64; 3]], used: &[f64]) -> f64 {
+pub(super) fn psnr(rendered: &[[f64; 3]], data: &DataTerm) -> f64 {
     let (mut se, mut n, mut peak) = (0.0, 0usize, 0.0f64);
-    for ((r, t), &w) in rendered.iter().zip(target).zip(used) {
-        if w > 0.0 {
+    for (p, r) in rendered.iter().enumerate() {
+        if data.used(p) {
             for c in 0..3 {
-                se += (r[c] - t[c]).powi(2);
-                peak = peak.max(t[c]);
+                se += data.residual(p, c, r[c]).powi(2);
+                peak = peak.max(data.target[p][c]);
             }
             n += 3;
         }
