@@ -106,7 +106,10 @@ impl OutlineGrid {
         let size = Vec2::new(mask.width as f32, mask.height as f32);
         let (lo, hi) = ((shape.lo - margin).max(Vec2::ZERO), (shape.hi + margin).min(size));
         let cell = ((hi - lo).max_element() / cells.max(1) as f32).max(1.0);
-        let (cols, rows) = (((hi.x - lo.x) / cell).ceil() as usize, ((hi.y - lo.y) / cell).ceil() as usize);
+        let (cols, rows) = (
+            ((hi.x - lo.x) / cell).ceil() as usize,
+            ((hi.y - lo.y) / cell).ceil() as usize,
+        );
         let (mut covered, mut pixels) = (vec![0.0f32; cols * rows], vec![0.0f32; cols * rows]);
         for y in lo.y as usize..(hi.y as usize).min(mask.height) {
             for x in lo.x as usize..(hi.x as usize).min(mask.width) {
@@ -147,14 +150,21 @@ impl OutlineGrid {
                 continue;
             };
             let area = (b - a).perp_dot(c - a);
-            let (lo, hi) = (a.min(b).min(c).max(Vec2::ZERO), a.max(b).max(c).min(Vec2::new(cols as f32, rows as f32)));
+            let (lo, hi) = (
+                a.min(b).min(c).max(Vec2::ZERO),
+                a.max(b).max(c).min(Vec2::new(cols as f32, rows as f32)),
+            );
             if area == 0.0 || lo.x >= hi.x || lo.y >= hi.y {
                 continue;
             }
             for r in lo.y.floor() as usize..hi.y.ceil() as usize {
                 for col in lo.x.floor() as usize..hi.x.ceil() as usize {
                     let p = Vec2::new(col as f32 + 0.5, r as f32 + 0.5);
-                    let w = [(c - b).perp_dot(p - b), (a - c).perp_dot(p - c), (b - a).perp_dot(p - a)];
+                    let w = [
+                        (c - b).perp_dot(p - b),
+                        (a - c).perp_dot(p - c),
+                        (b - a).perp_dot(p - a),
+                    ];
                     if w.iter().all(|&w| w * area >= 0.0) {
                         hit[r * cols + col] = true;
                     }
@@ -164,7 +174,10 @@ impl OutlineGrid {
         let (mut both, mut either) = (0.0f32, 0.0f32);
         for (i, &m) in self.covered.iter().enumerate() {
             let (r, c) = (i / self.cols * SUB, i % self.cols * SUB);
-            let h = (0..SUB * SUB).filter(|k| hit[(r + k / SUB) * cols + c + k % SUB]).count() as f32 / (SUB * SUB) as f32;
+            let h = (0..SUB * SUB)
+                .filter(|k| hit[(r + k / SUB) * cols + c + k % SUB])
+                .count() as f32
+                / (SUB * SUB) as f32;
             both += m.min(h);
             either += m.max(h);
         }
@@ -513,7 +526,10 @@ mod tests {
             ("lying end-on", Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
             ("standing on its top", Quat::from_rotation_x(std::f32::consts::PI)),
             ("tilted 55 deg in depth", Quat::from_rotation_x(55f32.to_radians())),
-            ("tilted 55 deg both ways", Quat::from_rotation_z(0.5) * Quat::from_rotation_x(55f32.to_radians())),
+            (
+                "tilted 55 deg both ways",
+                Quat::from_rotation_z(0.5) * Quat::from_rotation_x(55f32.to_radians()),
+            ),
         ];
         for (probe, kind) in [(&can, "can"), (&cap, "cap")] {
             let (lo, hi) = probe.mesh.bounds();
@@ -533,8 +549,15 @@ mod tests {
                     .iter()
                     .map(|(a, _)| a.dot(true_axis).abs().clamp(0.0, 1.0).acos().to_degrees())
                     .fold(f32::INFINITY, f32::min);
-                assert!(axes.len() <= h().axes_fitted, "{kind} {name}: {} hypotheses", axes.len());
-                assert!(best < 15.0, "{kind} {name}: nearest hypothesis {best} deg from the axis ({axes:?})");
+                assert!(
+                    axes.len() <= h().axes_fitted,
+                    "{kind} {name}: {} hypotheses",
+                    axes.len()
+                );
+                assert!(
+                    best < 15.0,
+                    "{kind} {name}: nearest hypothesis {best} deg from the axis ({axes:?})"
+                );
             }
         }
     }

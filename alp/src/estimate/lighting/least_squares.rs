@@ -414,8 +414,16 @@ mod tests {
             };
             solve(&transport, &data, settings, &x0).expect("a solve").env[27]
         };
-        assert!((texel_9(false, 5.0) - 2.0).abs() < 1e-3, "a target: {}", texel_9(false, 5.0));
-        assert!((texel_9(true, 5.0) - 5.0).abs() < 1e-3, "a bound: {}", texel_9(true, 5.0));
+        assert!(
+            (texel_9(false, 5.0) - 2.0).abs() < 1e-3,
+            "a target: {}",
+            texel_9(false, 5.0)
+        );
+        assert!(
+            (texel_9(true, 5.0) - 5.0).abs() < 1e-3,
+            "a bound: {}",
+            texel_9(true, 5.0)
+        );
         // (Anywhere at or above the bound costs nothing.)
         assert!(texel_9(true, 0.5) > 2.0 - 1e-3, "raised: {}", texel_9(true, 0.5));
     }
@@ -548,9 +556,14 @@ mod tests {
                 floor_of_level: 0.0,
                 max_iters: 2000,
             };
-            let x = solve(&transport, &DataTerm::exact(target.clone(), vec![[1.0; 3]; w * h]), settings, &vec![2.0; w * h * 3])
-                .expect("a solve")
-                .env;
+            let x = solve(
+                &transport,
+                &DataTerm::exact(target.clone(), vec![[1.0; 3]; w * h]),
+                settings,
+                &vec![2.0; w * h * 3],
+            )
+            .expect("a solve")
+            .env;
             (x.iter().zip(&truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / x.len() as f64).sqrt()
         };
         let (quadratic, edged) = (error(0.0), error(0.05));

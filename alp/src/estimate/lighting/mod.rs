@@ -469,8 +469,8 @@ pub(super) fn psnr(rendered: &[[f64; 3]], data: &DataTerm) -> f64 {
     let (mut se, mut n, mut peak) = (0.0, 0usize, 0.0f64);
     for (p, r) in rendered.iter().enumerate() {
         if data.used(p) {
-            for c in 0..3 {
-                se += data.residual(p, c, r[c]).powi(2);
+            for (c, &rc) in r.iter().enumerate() {
+                se += data.residual(p, c, rc).powi(2);
                 peak = peak.max(data.target[p][c]);
             }
             n += 3;
