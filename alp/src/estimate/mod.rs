@@ -64,6 +64,10 @@ pub(super) struct Probe<'a> {
     /// Whether it looks the same at every turn about its axis, where the
     /// asset tells (`symmetry::looks_alike_turned`; else its renders do).
     pub(super) alike_turned: Option<bool>,
+    /// Whether its colours are the same all round its axis, where the asset
+    /// tells (`symmetry::colours_alike_turned`): then colour cannot tell its
+    /// ends apart, and the photo judges the other end.
+    pub(super) colours_alike: Option<bool>,
 }
 
 impl<'a> Probe<'a> {
@@ -74,6 +78,7 @@ impl<'a> Probe<'a> {
             edges: EdgeAdjacency::new(&asset.mesh),
             turns_show: symmetry::turns_show(&asset.mesh, symmetry),
             alike_turned: symmetry::looks_alike_turned(asset, symmetry),
+            colours_alike: symmetry::colours_alike_turned(asset, symmetry),
         }
     }
 }
@@ -211,6 +216,7 @@ mod testing {
             edges: EdgeAdjacency::new(&asset.mesh),
             turns_show: false,
             alike_turned: symmetry::looks_alike_turned(asset, &Settings::default().symmetry),
+            colours_alike: symmetry::colours_alike_turned(asset, &Settings::default().symmetry),
         }
     }
 

@@ -174,7 +174,9 @@ fn fit_axes(ctx: &PoseContext, settings: &Settings, phases: &mut PhaseLog) -> Re
     // one leaning as far away, nor (where the probe's ends have like
     // outlines) which end is which, and a fit stops on whichever is nearest
     // its start: the outline twins of each axis whose outline fits
-    // (`hypotheses::outline_twins`) are hypotheses too, fitted likewise.
+    // (`hypotheses::outline_twins`) are hypotheses too, fitted likewise --
+    // unless an axis already there fits as well (a fit from the sphere's
+    // start on the twin's axis may have stopped in a poorer minimum).
     let best_fit = axis_poses.iter().map(|(_, loss)| *loss).fold(f64::INFINITY, f64::min);
     let cos_same = o.same_fitted_axis_deg.to_radians().cos();
     let mut twins: Vec<(usize, Pose)> = Vec::new();
@@ -184,12 +186,7 @@ fn fit_axes(ctx: &PoseContext, settings: &Settings, phases: &mut PhaseLog) -> Re
         }
         for twin in hypotheses::outline_twins(pose, mesh, &photo.camera, &settings.hypotheses) {
             let axis = twin.rotation * Vec3::Y;
-            let distinct = axis_poses
-                .iter()
-                .map(|(p, _)| p)
-                .chain(twins.iter().map(|(_, p)| p))
-                .all(|p| (p.rotation * Vec3::Y).dot(axis) < cos_same);
-            if distinct {
+            if twin_is_new(axis, &axis_poses, &twins, cos_same, o.axis_keep_ratio * best_fit) {
                 twins.push((a, twin));
             }
         }
@@ -212,6 +209,15 @@ fn fit_axes(ctx: &PoseContext, settings: &Settings, phases: &mut PhaseLog) -> Re
         axis_poses.push((pose, loss));
     }
     Ok((axes, axis_poses))
+}
+
+/// Whether an outline twin on `axis` is a new hypothesis: no axis fitted
+/// on it has a silhouette loss within `good` (a fit from the sphere's start
+/// there may have stopped in a poorer minimum than the twin's), and no twin
+/// on it is there yet. Axes closer than `cos_same` (a cosine) are one.
+fn twin_is_new(axis: Vec3, axis_poses: &[(Pose, f64)], twins: &[(usize, Pose)], cos_same: f32, good: f64) -> bool {
+    let on_axis = |p: &Pose| (p.rotation * Vec3::Y).dot(axis) >= cos_same;
+    axis_poses.iter().all(|(p, loss)| !(on_axis(p) && *loss <= good)) && twins.iter().all(|(_, p)| !on_axis(p))
 }
 
 /// The axes whose turns are ranked: the best-fitting distinct ones, at most
@@ -286,14 +292,18 @@ impl Ranker<'_> {
     fn rank(&self, kept: &[usize], phases: &mut PhaseLog) -> Result<Ranked> {
         let o = &self.settings.orientation;
         let mut starts = Starts::default();
-        // A probe symmetric about its axis (a cap of one colour) renders alike
-        // at every turn: its asset tells, or else two turns of the first axis
-        // do, and then one turn per axis is all there is to rank, and no yaw to
-        // refine.
-        let tells = o.starts_deg.len().min(2);
+        // A probe that shows no pattern turned (a cap of one colour) renders
+        // alike at every turn: its asset tells, or else two turns of the
+        // first axis do, and then one turn per axis is all there is to rank
+        // (the fitted one, where the asset tells), and no yaw to refine.
+        let known = self.ctx.probe.alike_turned;
+        let tells = match known {
+            Some(_) => 0,
+            None => o.starts_deg.len().min(2),
+        };
         let first: Vec<(usize, f32)> = o.starts_deg[..tells].iter().map(|&yaw| (kept[0], yaw)).collect();
         starts.record(self.rank_all(&first, false), phases)?;
-        let symmetric = match self.ctx.probe.alike_turned {
+        let symmetric = match known {
             Some(alike) => alike,
             None => tells == 2 && renders_alike(&starts.reports[0], &starts.reports[1], o),
         };
@@ -301,11 +311,11 @@ impl Ranker<'_> {
             .iter()
             .enumerate()
             .flat_map(|(k, &a)| {
-                let yaws = match (k, symmetric) {
-                    (0, true) => &[][..],
-                    (0, false) => &o.starts_deg[tells..],
-                    (_, true) => &o.starts_deg[..1],
-                    (_, false) => &o.starts_deg[..],
+                let yaws = match (symmetric, k == 0 && tells > 0) {
+                    (true, true) => &[][..],
+                    (true, false) => &[0.0][..],
+                    (false, true) => &o.starts_deg[tells..],
+                    (false, false) => &o.starts_deg[..],
                 };
                 yaws.iter().map(move |&yaw| (a, yaw))
             })
@@ -332,7 +342,8 @@ impl Ranker<'_> {
                 .collect(),
             false => {
                 let mut rivals = Vec::new();
-                for k in rival_starts(&starts.reports, &starts.poses, chosen, o) {
+                let colours_alike = self.ctx.probe.colours_alike == Some(true);
+                for k in rival_starts(&starts.reports, &starts.poses, chosen, colours_alike, o) {
                     let refined = self.refine_yaw(k, symmetric, &mut starts, phases)?;
                     rivals.push(starts.poses[refined]);
                 }
@@ -519,4 +530,24 @@ fn joint_rounds(
         fit = search_lighting(&pose, Some(&fit.env), phases)?;
     }
     Ok(pose)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Quat;
+
+    #[test]
+    fn a_twin_is_fitted_unless_its_axis_already_fits_well() {
+        let tipped = |deg: f32| Pose::new(Quat::from_rotation_x(deg.to_radians()), 1.0, Vec3::ZERO);
+        let axis = tipped(180.0).rotation * Vec3::Y;
+        let cos_same = 5f32.to_radians().cos();
+        // An axis 3 deg from the twin's, fitted within the margin: no new hypothesis.
+        assert!(!twin_is_new(axis, &[(tipped(177.0), 1.2)], &[], cos_same, 1.5));
+        // Fitted to a poorer minimum, 1.8 times the best: the twin is fitted.
+        assert!(twin_is_new(axis, &[(tipped(177.0), 1.8)], &[], cos_same, 1.5));
+        // An axis elsewhere does not count; a twin already there does.
+        assert!(twin_is_new(axis, &[(tipped(150.0), 1.0)], &[], cos_same, 1.5));
+        assert!(!twin_is_new(axis, &[], &[(0, tipped(179.0))], cos_same, 1.5));
+    }
 }

@@ -79,7 +79,9 @@ pub(super) fn best_ranked(
 /// The rivals of start `chosen` (see `OrientationSettings::rival_rank_deg`): the best-ranked
 /// start at the other end of the probe (its axis the other way) and the
 /// best-ranked half a turn away about the same axis, each if it ranked
-/// within the margin. Each kind's best, not only the better of the two: a
+/// within the margin -- the other end whatever its rank where the probe's
+/// colours are `colours_alike` all round (a grooved cap of one colour:
+/// colour cannot tell its ends apart). Each kind's best, not only the better of the two: a
 /// mask a pixel off turns how a probe's starts rank (a half turn of the
 /// wrong end can rank above the right end, which the photo then scores
 /// higher), and a small probe's end and half turn can both rank close.
@@ -87,6 +89,7 @@ pub(super) fn rival_starts(
     starts: &[StartReport],
     candidates: &[Pose],
     chosen: usize,
+    colours_alike: bool,
     o: &OrientationSettings,
 ) -> Vec<usize> {
     let axis = candidates[chosen].rotation * Vec3::Y;
@@ -95,13 +98,11 @@ pub(super) fn rival_starts(
         let turn = (starts[k].yaw_deg - starts[chosen].yaw_deg + 540.0).rem_euclid(360.0) - 180.0;
         !other_end(k) && starts[k].axis == starts[chosen].axis && turn.abs() > 90.0
     };
-    let close = |k: &usize| starts[*k].rgb_angle_deg - starts[chosen].rgb_angle_deg <= o.rival_rank_deg;
+    let close = |k: usize| starts[k].rgb_angle_deg - starts[chosen].rgb_angle_deg <= o.rival_rank_deg;
     let best = |kind: &dyn Fn(usize) -> bool| best_ranked(starts, (0..starts.len()).filter(|&k| kind(k)), false, o);
-    [best(&other_end), best(&half_turn)]
-        .into_iter()
-        .flatten()
-        .filter(close)
-        .collect()
+    let end = best(&other_end).filter(|&k| colours_alike || close(k));
+    let turn = best(&half_turn).filter(|&k| close(k));
+    [end, turn].into_iter().flatten().collect()
 }
 
 #[cfg(test)]
@@ -200,7 +201,7 @@ mod tests {
                 start(0, -170.0, angles[2]),
                 start(1, 20.0, angles[3]),
             ];
-            rival_starts(&starts, &[up(10.0), up(60.0), up(-170.0), down(20.0)], 0, &o())
+            rival_starts(&starts, &[up(10.0), up(60.0), up(-170.0), down(20.0)], 0, false, &o())
         };
         // A nearby turn is no rival, however close it ranked; the best of
         // each kind that ranked close is.
@@ -216,5 +217,11 @@ mod tests {
             [0usize; 0],
             "both ranked too far behind"
         );
+        // Colours alike all round cannot rank the ends: the other end is a
+        // rival however far behind it ranked.
+        let starts = [start(0, 10.0, 10.0), start(0, -170.0, 11.1), start(1, 20.0, 15.0)];
+        let poses = [up(10.0), up(-170.0), down(20.0)];
+        assert_eq!(rival_starts(&starts, &poses, 0, true, &o()), [2]);
+        assert_eq!(rival_starts(&starts, &poses, 0, false, &o()), [0usize; 0]);
     }
 }

@@ -184,19 +184,46 @@ pub fn turns_show(mesh: &Mesh, s: &SymmetrySettings) -> bool {
 
 /// Whether the probe looks the same at every turn about its axis of
 /// revolution, decided from the asset (Some): its whole surface of
-/// revolution, and its material (albedo, roughness, visibility) the same all
-/// round each circle about the axis, as on a cap of one colour and not on a
-/// can's label. None where the asset cannot tell: no single axis (a sphere,
-/// of revolution about every line through its centre), or facets that do
-/// not sample the circles (a scan's irregular mesh). Comparing two turns'
-/// renders tells it only where the mesh's facets come back at that turn (a
-/// 64-sided cap's at 45 deg, not at 30): elsewhere the facets alone make
-/// the renders differ by more than `renders_alike` allows.
+/// revolution, and its colours the same all round ([`colours_alike_turned`]),
+/// as on a smooth cap of one colour, not on a can's label nor on a grooved
+/// cap (whose grooves a turn moves). None where the asset cannot tell: no
+/// single axis (a sphere, of revolution about every line through its
+/// centre), or facets that do not sample the circles (a scan's irregular
+/// mesh). Comparing two turns' renders tells it only where the mesh's
+/// facets come back at that turn (a 64-sided cap's at 45 deg, not at 30):
+/// elsewhere the facets alone make the renders differ by more than
+/// `renders_alike` allows.
 pub fn looks_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bool> {
     let revolution = axis_of_revolution(&asset.mesh, s)?;
     if revolution.share < s.wholly_revolved {
         return Some(false);
     }
+    material_alike_about(asset, &revolution, s)
+}
+
+/// Whether the probe's material (albedo, roughness, visibility) is the same
+/// all round each circle about its axis, decided from the asset (Some): a
+/// cap of one colour, grooved or not, and a mug of one colour have no
+/// colour pattern to tell a turn or an end by; a can's label has. The axis
+/// is the surface's axis of revolution, or where none stands out (grooves
+/// round most of a cap's side; a sphere) the asset's own, mesh +Y through
+/// the surface's centroid. None where facets do not sample the circles.
+pub fn colours_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bool> {
+    let revolution = axis_of_revolution(&asset.mesh, s).unwrap_or_else(|| {
+        let facets = facets(&asset.mesh);
+        let area: f64 = facets.iter().map(|f| f.2).sum();
+        Revolution {
+            axis: DVec3::Y,
+            point: facets.iter().map(|(p, _, w)| *p * *w).sum::<DVec3>() / area.max(1e-300),
+            share: 0.0,
+        }
+    });
+    material_alike_about(asset, &revolution, s)
+}
+
+/// Whether the material is the same all round each circle about
+/// `revolution`'s axis (None where the facets do not sample the circles).
+fn material_alike_about(asset: &ProbeAsset, revolution: &Revolution, s: &SymmetrySettings) -> Option<bool> {
     if [&asset.albedo, &asset.roughness, &asset.visibility]
         .iter()
         .all(|t| t.is_constant())
@@ -518,6 +545,24 @@ mod tests {
             ..cap.clone()
         };
         assert_eq!(looks_alike_turned(&turned, &s()), Some(true));
+        // Grooves round the whole cap, 45 of them 3 % deep: hardly any normal
+        // meets the axis, but its colours are still the same all round.
+        let mut grooved = cap.clone();
+        for p in &mut grooved.mesh.positions {
+            let ripple = 1.0 + 0.03 * (45.0 * p.z.atan2(p.x)).cos();
+            (p.x, p.z) = (p.x * ripple, p.z * ripple);
+        }
+        assert!(axis_of_revolution(&grooved.mesh, &s()).is_none());
+        assert_eq!(looks_alike_turned(&grooved, &s()), None);
+        assert_eq!(colours_alike_turned(&grooved, &s()), Some(true));
+        // A mug of one colour: its handle shows its turn, its colours do not.
+        let mug = ProbeAsset {
+            mesh: mug(),
+            ..cap.clone()
+        };
+        assert_eq!(looks_alike_turned(&mug, &s()), Some(false));
+        assert_eq!(colours_alike_turned(&mug, &s()), Some(true));
+        assert_eq!(colours_alike_turned(&striped, &s()), Some(false));
         // One facet in seven, each slid along the axis by its own fraction
         // of 4 mm (a coarse scan's irregular facets): still of revolution,
         // but no circle is sampled often enough to tell.
@@ -538,11 +583,11 @@ mod tests {
         };
         assert!(axis_of_revolution(&irregular.mesh, &s()).is_some());
         assert_eq!(looks_alike_turned(&irregular, &s()), None);
-        // A sphere has no single axis: the renders tell.
-        assert_eq!(
-            looks_alike_turned(&render::procedural::UvSphere::default().build(), &s()),
-            None
-        );
+        // A sphere has no single axis: the renders tell; about its own
+        // axis, one of one colour shows no colour pattern.
+        let sphere = render::procedural::UvSphere::default().build();
+        assert_eq!(looks_alike_turned(&sphere, &s()), None);
+        assert_eq!(colours_alike_turned(&sphere, &s()), Some(true));
     }
 
     #[test]
