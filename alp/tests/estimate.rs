@@ -108,9 +108,10 @@ fn a_cap_of_one_colour_leaning_away_is_found_the_right_way_up() {
 }
 
 /// The cap leaning 17 deg away as above, in a 320x240 photo whose mask
-/// lost its outer ring of pixels (as `tools/eval_suite.py --mask-error -1`
-/// shrinks it): the probe, its true pose and the photo.
-fn cap_with_a_mask_a_pixel_too_narrow() -> (ProbeAsset, Pose, Photo) {
+/// lost `pixels` outer rings of pixels (as `tools/eval_suite.py
+/// --mask-error -1` shrinks it; gained them where `pixels` is negative):
+/// the probe, its true pose and the photo.
+fn cap_with_a_mask_too_narrow(pixels: i32) -> (ProbeAsset, Pose, Photo) {
     let probe = ThermosCap::default().build();
     let lean = Quat::from_rotation_x(-17f32.to_radians());
     let truth = Pose::new(lean * Quat::from_rotation_y(0.7), 1.0, Vec3::ZERO);
@@ -122,15 +123,20 @@ fn cap_with_a_mask_a_pixel_too_narrow() -> (ProbeAsset, Pose, Photo) {
         (320, 240),
     );
     let (w, h) = (exact.mask.width as i64, exact.mask.height as i64);
-    let inside = |x: i64, y: i64| x >= 0 && y >= 0 && x < w && y < h && exact.mask.inside[(y * w + x) as usize];
-    let narrow = (0..w * h)
-        .map(|p| {
-            let (x, y) = (p % w, p / w);
-            [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]
-                .iter()
-                .all(|(dx, dy)| inside(x + dx, y + dy))
-        })
-        .collect();
+    let mut narrow = exact.mask.inside.clone();
+    for _ in 0..pixels.abs() {
+        let inside = |x: i64, y: i64| x >= 0 && y >= 0 && x < w && y < h && narrow[(y * w + x) as usize];
+        narrow = (0..w * h)
+            .map(|p| {
+                let (x, y) = (p % w, p / w);
+                let mut cross = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)].iter();
+                match pixels > 0 {
+                    true => cross.all(|(dx, dy)| inside(x + dx, y + dy)),
+                    false => cross.any(|(dx, dy)| inside(x + dx, y + dy)),
+                }
+            })
+            .collect();
+    }
     let narrow = Mask::new(w as usize, h as usize, narrow);
     let photo = Photo::new(exact.image.clone(), narrow, exact.camera).expect("a valid photo");
     (probe, truth, photo)
@@ -146,7 +152,7 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_has_its_ends_told_apart_by_the_photo()
     // The outline hardly tells the cap's ends apart: the rival test lights
     // each end from its own pilot map, and the photo scores the right end
     // higher, whichever end the outline chose.
-    let (probe, truth, photo) = cap_with_a_mask_a_pixel_too_narrow();
+    let (probe, truth, photo) = cap_with_a_mask_too_narrow(1);
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
     // The lean search starts from the kept end's score.
@@ -179,7 +185,9 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_has_its_ends_told_apart_by_the_photo()
 
 #[test]
 fn the_size_search_goes_ahead_of_the_rival_test_and_the_rival_grows_with_the_chosen_pose() {
-    let (probe, truth, photo) = cap_with_a_mask_a_pixel_too_narrow();
+    // A mask two pixels too wide: the outline's pose is too large, and the
+    // photo shrinks it (one pixel too narrow, it no longer tells).
+    let (probe, truth, photo) = cap_with_a_mask_too_narrow(-2);
     let mut settings = Settings::new(Quality::Fast);
     settings.env_size = (64, 32);
     (settings.pose_search.size_step_px, settings.pose_search.lean_step_deg) = (0.5, 0.3);

@@ -93,6 +93,15 @@ struct Kept {
     scored: Option<(f64, Vec<f64>)>,
 }
 
+/// What [`PhotoJudge::refine`] searches.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum Moves {
+    /// The lean and the sway, and a `patterned` probe's turn, in rounds.
+    All { patterned: bool },
+    /// The turn alone, once.
+    Turn,
+}
+
 /// Judges poses by the photo: what every photo-scored search shares.
 pub(super) struct PhotoJudge<'a> {
     pub(super) probe: &'a Probe<'a>,
@@ -167,7 +176,8 @@ impl PhotoJudge<'_> {
             false => Some(self.rival_test(phases, rivals, refine, patterned, &mut kept, &mut refinement)?),
         };
         if refine && rival.is_none() {
-            (kept.pose, _) = self.refine(&kept.map, phases, patterned, "chosen", kept.pose, None, &mut refinement)?;
+            let moves = Moves::All { patterned };
+            (kept.pose, _) = self.refine(&kept.map, phases, moves, "chosen", kept.pose, None, &mut refinement)?;
         }
         // The kept pose's own pilot map, if the photo moved it: the
         // refinement's maps were solved from the map of where it began.
@@ -302,10 +312,19 @@ impl PhotoJudge<'_> {
             });
             Ok((score, fit.into_map()))
         };
+        // A small probe's pose is refined by the photo in full; a patterned
+        // probe's turn, which the colour ranking leaves a few degrees off
+        // (a grooved cap's grooves out of phase score lower than its wrong
+        // end), before the ends and turns are compared.
+        let moves = match (refine, patterned) {
+            (true, _) => Some(Moves::All { patterned }),
+            (false, true) => Some(Moves::Turn),
+            (false, false) => None,
+        };
         let mut chosen = score(&kept.pose, &kept.map, phases)?;
-        if refine {
+        if let Some(moves) = moves {
             let scored = Some(chosen);
-            (kept.pose, chosen) = self.refine(&kept.map, phases, patterned, "chosen", kept.pose, scored, refinement)?;
+            (kept.pose, chosen) = self.refine(&kept.map, phases, moves, "chosen", kept.pose, scored, refinement)?;
         }
         // Each rival's pilot map and score (refined as the chosen pose
         // was); the best-scored one is the test's. A rival the photo
@@ -316,9 +335,9 @@ impl PhotoJudge<'_> {
             let mut rival = rival_piloted;
             let rival_scored = self.pilot(&rival, phases).and_then(|rival_map| {
                 let mut scored = score(&rival, &rival_map, phases)?;
-                if refine {
+                if let Some(moves) = moves {
                     let known = Some(scored);
-                    (rival, scored) = self.refine(&rival_map, phases, patterned, "rival", rival, known, refinement)?;
+                    (rival, scored) = self.refine(&rival_map, phases, moves, "rival", rival, known, refinement)?;
                 }
                 Ok((scored, rival_map))
             });
@@ -439,7 +458,8 @@ impl PhotoJudge<'_> {
     /// phase `lighting_refine`) over the lean, the sway
     /// ([`hypotheses::swayed`]) and, for a `patterned` probe, the turn about
     /// its axis, each from where the one before left it, in rounds until
-    /// one keeps no move (at most `PoseSearchSettings::photo_refine_rounds`). Every
+    /// one keeps no move (at most `PoseSearchSettings::photo_refine_rounds`);
+    /// or over the turn alone, once ([`Moves`]). Every
     /// candidate's lighting is solved from `start`, the map of a pose near
     /// it; `scored` is `pose`'s score, if known. Rounds, because the score
     /// ripples (its samples move with the pose) and a search whose first
@@ -450,7 +470,7 @@ impl PhotoJudge<'_> {
         &self,
         start: &[f64],
         phases: &mut PhaseLog,
-        patterned: bool,
+        moves: Moves,
         candidate: &'static str,
         pose: Pose,
         scored: Option<(f64, Vec<f64>)>,
@@ -468,9 +488,16 @@ impl PhotoJudge<'_> {
             ("turn", turn, |pose, mesh, _, deg| hypotheses::turned(pose, mesh, deg)),
         ];
         let (mesh, camera) = (&self.probe.asset.mesh, &self.photo.camera);
-        for _ in 0..settings.pose_search.photo_refine_rounds {
+        let (searched, rounds) = match moves {
+            Moves::All { patterned } => (
+                &directions[..2 + patterned as usize],
+                settings.pose_search.photo_refine_rounds,
+            ),
+            Moves::Turn => (&directions[2..], 1),
+        };
+        for _ in 0..rounds {
             let mut moved = false;
-            for &(direction, reach, moved_by) in &directions[..2 + patterned as usize] {
+            for &(direction, reach, moved_by) in searched {
                 let from = pose;
                 let (kept, kept_scored, search) = self.line_search(
                     start,
@@ -578,7 +605,15 @@ mod tests {
         };
         let mut steps = Vec::new();
         let (refined, (score, _)) = judge
-            .refine(&pilot, &mut phases, true, "chosen", start, None, &mut steps)
+            .refine(
+                &pilot,
+                &mut phases,
+                Moves::All { patterned: true },
+                "chosen",
+                start,
+                None,
+                &mut steps,
+            )
             .expect("a refinement");
         // The axis: 1.58 -> 0.26 deg. (The turn, 3 deg off, gains 0.17 dB
         // at most here, under the searches' margin: this photo hardly
@@ -611,9 +646,25 @@ mod tests {
         // A probe without a pattern is not turned.
         let mut steps = Vec::new();
         judge
-            .refine(&pilot, &mut phases, false, "rival", start, None, &mut steps)
+            .refine(
+                &pilot,
+                &mut phases,
+                Moves::All { patterned: false },
+                "rival",
+                start,
+                None,
+                &mut steps,
+            )
             .expect("a refinement");
         assert!(steps.iter().all(|s| s.direction != "turn" && s.candidate == "rival"));
+        // The turn alone: one search, the axis where it was.
+        let mut steps = Vec::new();
+        let (turned, _) = judge
+            .refine(&pilot, &mut phases, Moves::Turn, "rival", start, None, &mut steps)
+            .expect("a refinement");
+        assert_eq!(steps.len(), 1);
+        assert_eq!(steps[0].direction, "turn");
+        assert!((off(&turned) - off(&start)).abs() < 1e-3, "the axis moved");
     }
 
     /// The leans `line_search_max` tries on `score` (step 0.3, reach 2.4).
