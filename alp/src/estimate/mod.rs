@@ -73,12 +73,15 @@ pub(super) struct Probe<'a> {
 impl<'a> Probe<'a> {
     /// `asset` (its axis along mesh +Y) prepared.
     pub(super) fn new(asset: &'a ProbeAsset, symmetry: &SymmetrySettings) -> Self {
+        // The axis of revolution, found once for the three readings of it.
+        let revolution = symmetry::axis_of_revolution(&asset.mesh, symmetry);
+        let revolution = revolution.as_ref();
         Probe {
             asset,
             edges: EdgeAdjacency::new(&asset.mesh),
-            turns_show: symmetry::turns_show(&asset.mesh, symmetry),
-            alike_turned: symmetry::looks_alike_turned(asset, symmetry),
-            colours_alike: symmetry::colours_alike_turned(asset, symmetry),
+            turns_show: symmetry::turns_show_about(&asset.mesh, revolution, symmetry),
+            alike_turned: symmetry::alike_turned_about(asset, revolution, symmetry),
+            colours_alike: symmetry::colours_alike_about(asset, revolution, symmetry),
         }
     }
 }
@@ -212,11 +215,8 @@ mod testing {
     /// The probe `asset` as the estimate holds it.
     pub(super) fn probe_of(asset: &ProbeAsset) -> Probe<'_> {
         Probe {
-            asset,
-            edges: EdgeAdjacency::new(&asset.mesh),
             turns_show: false,
-            alike_turned: symmetry::looks_alike_turned(asset, &Settings::default().symmetry),
-            colours_alike: symmetry::colours_alike_turned(asset, &Settings::default().symmetry),
+            ..Probe::new(asset, &Settings::default().symmetry)
         }
     }
 

@@ -176,7 +176,12 @@ pub struct Revolution {
 /// not wholly of revolution (a mug's handle; a box), though not a sphere,
 /// of revolution about every line through its centre.
 pub fn turns_show(mesh: &Mesh, s: &SymmetrySettings) -> bool {
-    match axis_of_revolution(mesh, s) {
+    turns_show_about(mesh, axis_of_revolution(mesh, s).as_ref(), s)
+}
+
+/// [`turns_show`] given the mesh's axis of revolution, if it has one.
+pub(super) fn turns_show_about(mesh: &Mesh, revolution: Option<&Revolution>, s: &SymmetrySettings) -> bool {
+    match revolution {
         Some(revolution) => revolution.share < s.wholly_revolved,
         None => axis_of_spread(mesh, s).is_some(),
     }
@@ -194,11 +199,20 @@ pub fn turns_show(mesh: &Mesh, s: &SymmetrySettings) -> bool {
 /// elsewhere the facets alone make the renders differ by more than
 /// `renders_alike` allows.
 pub fn looks_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bool> {
-    let revolution = axis_of_revolution(&asset.mesh, s)?;
+    alike_turned_about(asset, axis_of_revolution(&asset.mesh, s).as_ref(), s)
+}
+
+/// [`looks_alike_turned`] given the mesh's axis of revolution, if it has one.
+pub(super) fn alike_turned_about(
+    asset: &ProbeAsset,
+    revolution: Option<&Revolution>,
+    s: &SymmetrySettings,
+) -> Option<bool> {
+    let revolution = revolution?;
     if revolution.share < s.wholly_revolved {
         return Some(false);
     }
-    material_alike_about(asset, &revolution, s)
+    material_alike_about(asset, revolution, s)
 }
 
 /// Whether the probe's material (albedo, roughness, visibility) is the same
@@ -209,7 +223,16 @@ pub fn looks_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bo
 /// round most of a cap's side; a sphere) the asset's own, mesh +Y through
 /// the surface's centroid. None where facets do not sample the circles.
 pub fn colours_alike_turned(asset: &ProbeAsset, s: &SymmetrySettings) -> Option<bool> {
-    let revolution = axis_of_revolution(&asset.mesh, s).unwrap_or_else(|| {
+    colours_alike_about(asset, axis_of_revolution(&asset.mesh, s).as_ref(), s)
+}
+
+/// [`colours_alike_turned`] given the mesh's axis of revolution, if it has one.
+pub(super) fn colours_alike_about(
+    asset: &ProbeAsset,
+    revolution: Option<&Revolution>,
+    s: &SymmetrySettings,
+) -> Option<bool> {
+    let revolution = revolution.copied().unwrap_or_else(|| {
         let facets = facets(&asset.mesh);
         let area: f64 = facets.iter().map(|f| f.2).sum();
         Revolution {
