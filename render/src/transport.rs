@@ -330,6 +330,15 @@ impl Transport {
 
     /// The entries of pixel `p`'s row.
     #[inline]
+    /// The texel pixel `p` reads most strongly (by the summed weight of its
+    /// channels), if it reads any.
+    pub fn strongest_texel(&self, p: usize) -> Option<usize> {
+        self.row(p)
+            .iter()
+            .max_by_key(|e| e.lanes[..3].iter().map(|&q| q as u32).sum::<u32>())
+            .map(Entry::index)
+    }
+
     pub(crate) fn row(&self, p: usize) -> &[Entry] {
         &self.rows[self.row_start[p]..self.row_start[p + 1]]
     }

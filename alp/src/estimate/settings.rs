@@ -224,6 +224,11 @@ pub struct LightingSettings {
     /// The output map's least radiance of a texel, as a fraction of its
     /// local level: no direction is black, and a black texel has no colour.
     pub floor_of_level: f64,
+    /// A texel that a clipped pixel reads most strongly, and that the
+    /// photo sees more than this share through clipped pixels, is free of
+    /// the smoothness prior: a light brighter than the sensor's range rises
+    /// as far as the unclipped pixels allow (1: never).
+    pub clipped_light_share: f64,
     /// Neighbouring pixels whose directional albedos differ by more than
     /// this (relative) lie on an edge of the probe's reflectance, which the
     /// output map's fit leaves out (a pose a fraction of a pixel off would
@@ -374,6 +379,7 @@ impl Default for Settings {
                     edge_evidence: 0.0,
                 },
                 floor_of_level: 0.02,
+                clipped_light_share: 0.5,
                 edge_contrast: 0.15,
                 spp_per_pass: 64,
                 pass_samples: 1 << 20,

@@ -120,6 +120,10 @@ pub struct LightingSolve {
     /// The least radiance of a texel, as a fraction of the start's local
     /// level (grey; 0: non-negative only).
     pub floor_of_level: f64,
+    /// A texel that a clipped pixel reads most strongly, and whose data
+    /// curvature comes more than this share from clipped pixels, is free
+    /// of the prior ([`clipped_lights`]; 1: none is).
+    pub clipped_light_share: f64,
     /// L-BFGS iterations at most.
     pub max_iters: usize,
 }
@@ -199,6 +203,8 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
         .iter()
         .map(|h| 2.0 * h / weight_sum)
         .collect();
+    let light = clipped_lights(transport, data, settings.clipped_light_share);
+    pairs.retain(|p| !light[p.i] && !light[p.j]);
     let pair_curvature = settings.smoothness.channel_curvature();
     let mut prior_curvature = vec![0.0; w * h];
     for p in &pairs {
@@ -277,6 +283,34 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
         evaluations: state.evals,
         termination: state.termination,
     })
+}
+
+/// The texels of a light brighter than the sensor's range: those that a
+/// clipped pixel (`data.at_least`) reads most strongly and that the data
+/// see more than `share` through clipped pixels (their curvature). A
+/// clipped pixel only bounds the light from below, and the prior, relative
+/// to the start's level there (the searches leave clipped pixels out),
+/// would hold the light at the bound's least; free of it, the light rises
+/// as far as the unclipped pixels around its footprint allow.
+pub(super) fn clipped_lights(transport: &Transport, data: &DataTerm, share: f64) -> Vec<bool> {
+    let texels = transport.width * transport.height;
+    let mut aimed = vec![false; texels];
+    (0..transport.pixels)
+        .filter(|&p| data.at_least[p] && data.used(p))
+        .filter_map(|p| transport.strongest_texel(p))
+        .for_each(|t| aimed[t] = true);
+    if !aimed.contains(&true) {
+        return aimed;
+    }
+    let clipped_weight: Vec<[f64; 3]> = (data.weight.iter().zip(&data.at_least))
+        .map(|(w, &a)| if a { *w } else { [0.0; 3] })
+        .collect();
+    let clipped = transport.weighted_column_norms(&clipped_weight);
+    let all = transport.weighted_column_norms(&data.weight);
+    let sum = |v: &[f64], t: usize| v[3 * t..3 * t + 3].iter().sum::<f64>();
+    (0..texels)
+        .map(|t| aimed[t] && sum(&clipped, t) > share * sum(&all, t))
+        .collect()
 }
 
 /// A lighting solve's result.
@@ -375,6 +409,7 @@ mod tests {
                 smoothness: Smoothness::quadratic(0.0),
                 relative_smoothness: false,
                 floor_of_level: 0.0,
+                clipped_light_share: 1.0,
                 max_iters,
             },
             &vec![1.0; w * h * 3],
@@ -410,6 +445,7 @@ mod tests {
                 smoothness: Smoothness::quadratic(0.0),
                 relative_smoothness: false,
                 floor_of_level: 0.0,
+                clipped_light_share: 1.0,
                 max_iters: 200,
             };
             solve(&transport, &data, settings, &x0).expect("a solve").env[27]
@@ -426,6 +462,47 @@ mod tests {
         );
         // (Anywhere at or above the bound costs nothing.)
         assert!(texel_9(true, 0.5) > 2.0 - 1e-3, "raised: {}", texel_9(true, 0.5));
+    }
+
+    #[test]
+    fn a_light_seen_through_clipped_pixels_rises_as_far_as_the_rest_allows() {
+        // Each pixel reads one texel of a map of 1s; texel 9 holds a light of
+        // 100, which its own pixel (clipped at 2) bounds from below only, and
+        // one more pixel reads at 5 % beside texel 10 (a rough lobe's tail:
+        // 0.95 + 5 = 5.95). Under a strong prior the light stays near its
+        // bound; free of it, the tail's pixel sets it.
+        let (w, h) = (8, 4);
+        let centre = |t: usize| Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32);
+        let mut uv: Vec<Vec2> = (0..w * h).map(centre).collect();
+        let mut segment: Vec<u32> = (0..uv.len() as u32).collect();
+        let mut throughput = vec![[1.0f32; 3]; uv.len()];
+        let tail = (w * h) as u32;
+        uv.extend([centre(9), centre(10)]);
+        segment.extend([tail, tail]);
+        throughput.extend([[0.05; 3], [0.95; 3]]);
+        let transport = Transport::new(&segment, &uv, &throughput, w * h + 1, w, h);
+        let mut target = vec![[1.0; 3]; w * h + 1];
+        target[9] = [2.0; 3];
+        target[w * h] = [5.95; 3];
+        let mut data = DataTerm::exact(target, vec![[1.0; 3]; w * h + 1]);
+        data.at_least[9] = true;
+        let light = |share: f64| {
+            let settings = LightingSolve {
+                smoothness: Smoothness::quadratic(1.0),
+                relative_smoothness: false,
+                floor_of_level: 0.0,
+                clipped_light_share: share,
+                max_iters: 500,
+            };
+            solve(&transport, &data, settings, &vec![1.0; w * h * 3])
+                .expect("a solve")
+                .env[27]
+        };
+        let lights = clipped_lights(&transport, &data, 0.5);
+        assert_eq!(lights.iter().filter(|&&l| l).count(), 1, "one light texel");
+        assert!(lights[9], "the clipped pixel's texel");
+        assert!((light(0.5) - 100.0).abs() < 1.0, "free: {}", light(0.5));
+        assert!(light(1.0) < 10.0, "held by the prior: {}", light(1.0));
     }
 
     #[test]
@@ -446,6 +523,7 @@ mod tests {
                 smoothness: Smoothness::quadratic(1e-9),
                 relative_smoothness: true,
                 floor_of_level,
+                clipped_light_share: 1.0,
                 max_iters: 500,
             };
             let x = solve(
@@ -554,6 +632,7 @@ mod tests {
                 },
                 relative_smoothness: false,
                 floor_of_level: 0.0,
+                clipped_light_share: 1.0,
                 max_iters: 2000,
             };
             let x = solve(

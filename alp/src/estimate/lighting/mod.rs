@@ -250,6 +250,7 @@ pub(super) fn fit_lighting(
             LightingPurpose::Output => lighting.floor_of_level,
             LightingPurpose::Search => 0.0,
         },
+        clipped_light_share: lighting.clipped_light_share,
         max_iters,
     };
     let at = |(w, h): (usize, usize)| record.transport(w, h);
