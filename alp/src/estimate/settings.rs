@@ -239,7 +239,9 @@ pub struct LightingSettings {
     pub spp_per_pass: u32,
     /// Light samples of one pass at most: a pass's memory.
     pub pass_samples: usize,
-    /// Light samples of the final solve at most: its memory and time.
+    /// Light samples of the final solve at most: its memory and time
+    /// against the output map's noise, which a large probe's many pixels
+    /// average down.
     pub final_sample_budget: usize,
     /// Samples per pixel of the output map's solves at least, however large
     /// the probe.
@@ -383,7 +385,7 @@ impl Default for Settings {
                 edge_contrast: 0.15,
                 spp_per_pass: 64,
                 pass_samples: 1 << 20,
-                final_sample_budget: 8 << 20,
+                final_sample_budget: 2 << 20,
                 least_final_spp: 16,
                 coarsest_height: 8,
                 coarse_level_iters: 60,
@@ -488,6 +490,7 @@ impl Settings {
                 spp_pilot: 32,
                 spp_lean: 32,
                 spp_final: 256,
+                final_sample_budget: 8 << 20,
                 ..d.lighting
             },
             joint: JointSettings {
