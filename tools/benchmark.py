@@ -9,7 +9,8 @@ with the train-test gap. Python 3 standard library only.
 Writes OUT/results.jsonl (one line per scene: scene.json's draw, `alp eval`'s fields, success,
 wall_s, cpu_s, max_rss_mb) and OUT/summary.md, and prints the summary. A rerun with the same
 binary keeps the lines it already has (delete results.jsonl to start over), so an interrupted
-run resumes. Tune on train; report test.
+run resumes; lines of scenes outside the run (another split) stay, and the summary covers every
+scene the same binary has run there. Tune on train; report test.
 
 A pose is found when the observable part of it is within 5 degrees: the rotation for a probe
 whose label breaks its symmetry ("full"), the axis direction for one symmetric about its axis
@@ -142,14 +143,13 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     cmdline = " ".join(["python3", "tools/benchmark.py"] + sys.argv[1:])
     results = os.path.join(args.out, "results.jsonl")
-    kept = {}
+    existing, kept = [], {}
     if os.path.exists(results):
         with open(results) as f:
-            for line in f:
-                r = json.loads(line)
-                if (r["alp_sha256"], r["quality"], r.get("known_pose", False)) == (
-                        args.alp_sha[:12], args.quality, args.known_pose):
-                    kept[(r["split"], r["scene"])] = r
+            existing = [json.loads(line) for line in f if line.strip()]
+    same_run = lambda r: (r["alp_sha256"], r["quality"], r.get("known_pose", False)) == (
+        args.alp_sha[:12], args.quality, args.known_pose)
+    kept = {(r["split"], r["scene"]): r for r in existing if same_run(r)}
     cache_path = os.path.join(args.out, "eval_cache.json")
     cache = json.load(open(cache_path)) if os.path.exists(cache_path) else {}
     plan = []
@@ -180,10 +180,16 @@ def main():
             if key not in kept:
                 out.write(json.dumps(rec) + "\n")
                 out.flush()
-    with open(results + ".tmp", "w") as f:  # the kept and new lines, in the plan's order
-        f.writelines(json.dumps(r) + "\n" for r in records)
+    # Lines of scenes outside the plan (another split, an earlier --only)
+    # stay; the plan's scenes have their kept or new lines, in its order.
+    planned = {(r["split"], r["scene"]) for r in records}
+    others = [r for r in existing if (r["split"], r["scene"]) not in planned]
+    with open(results + ".tmp", "w") as f:
+        f.writelines(json.dumps(r) + "\n" for r in others + records)
     os.replace(results + ".tmp", results)
-    text = summary(records, cmdline)
+    # The summary covers every scene this binary has run here (both splits
+    # when they were run one after the other).
+    text = summary([r for r in others if same_run(r)] + records, cmdline)
     with open(os.path.join(args.out, "summary.md"), "w") as f:
         f.write(text)
     print(text)
