@@ -28,6 +28,7 @@ pub mod pose_search;
 pub mod ranking;
 pub mod report;
 pub mod settings;
+pub mod shading;
 pub mod silhouette;
 pub mod symmetry;
 

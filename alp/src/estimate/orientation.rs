@@ -23,6 +23,7 @@ use super::photo::{Photo, Pixels};
 use super::ranking::{best_ranked, mean_rgb_angle_deg, renders_alike, rival_starts};
 use super::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
 use super::settings::{OrientationSettings, Settings};
+use super::shading::LabelVariation;
 use super::silhouette::{
     PoseContext, PoseSteps, fit_pose_to_image, fit_silhouette, polish_silhouette, refit_silhouette, silhouette_loss,
 };
@@ -327,6 +328,16 @@ impl Ranker<'_> {
         // either end up, and the starts go by their outlines.
         let best = best_ranked(&starts.reports, 0..starts.reports.len(), symmetric, o).expect("at least one start");
         let chosen = self.refine_yaw(best, symmetric, &mut starts, phases)?;
+        // A probe with a pattern of colours takes the turn its shading tells
+        // (lighting-free); the photo then judges only its other end.
+        let label = match !symmetric && self.ctx.probe.colours_alike != Some(true) {
+            true => Some(LabelVariation::new(self.ctx.probe, self.ctx.photo, self.ctx.clipped)?),
+            false => None,
+        };
+        let chosen = match &label {
+            Some(label) => self.turn_by_label(label, chosen, &mut starts, phases)?,
+            None => chosen,
+        };
         let axis = starts.poses[chosen].rotation * Vec3::Y;
         let rivals = match symmetric {
             true => self
@@ -344,7 +355,11 @@ impl Ranker<'_> {
                 let mut rivals = Vec::new();
                 let colours_alike = self.ctx.probe.colours_alike == Some(true);
                 for k in rival_starts(&starts.reports, &starts.poses, chosen, colours_alike, o) {
-                    let refined = self.refine_yaw(k, symmetric, &mut starts, phases)?;
+                    let refined = match &label {
+                        Some(_) if (starts.poses[k].rotation * Vec3::Y).dot(axis) > 0.0 => continue,
+                        Some(label) => self.turn_by_label(label, k, &mut starts, phases)?,
+                        None => self.refine_yaw(k, symmetric, &mut starts, phases)?,
+                    };
                     rivals.push(starts.poses[refined]);
                 }
                 rivals
@@ -384,6 +399,28 @@ impl Ranker<'_> {
             step *= 0.5;
         }
         Ok(best)
+    }
+
+    /// Start `k` turned about its axis to the turn of least label variation
+    /// (a new start, ranked), or `k` itself when that is its own turn.
+    fn turn_by_label(
+        &self,
+        label: &LabelVariation,
+        k: usize,
+        starts: &mut Starts,
+        phases: &mut PhaseLog,
+    ) -> Result<usize> {
+        let o = &self.settings.orientation;
+        let (turn, _) = label.best_turn(&starts.poses[k], o);
+        let turn = (turn + 180.0).rem_euclid(360.0) - 180.0;
+        if turn.abs() < o.yaw_refine_deg {
+            return Ok(k);
+        }
+        let (a, yaw) = (starts.reports[k].axis, starts.reports[k].yaw_deg);
+        phases.expect_more(1);
+        let tried = starts.reports.len();
+        starts.record(self.rank_all(&[(a, yaw + turn)], true), phases)?;
+        Ok(tried)
     }
 
     /// The turns `(axis, yaw)` ranked side by side, in order.

@@ -193,6 +193,11 @@ pub struct OrientationSettings {
     /// The best start's yaw is refined by halving steps down to this
     /// (degrees): rotation error against two rankings per halving.
     pub yaw_refine_deg: f32,
+    /// The step (degrees) of the full-circle scan of a patterned probe's
+    /// turn by its label variation (`shading`), refined by halving steps
+    /// down to `yaw_refine_deg`: finer finds a narrow minimum, at one
+    /// ray-traced albedo image per turn.
+    pub label_scan_deg: f32,
     /// A start within this RGB angle (degrees) of the chosen one's, at the
     /// other end or half a turn away, is a rival the photo judges.
     pub rival_rank_deg: f64,
@@ -365,6 +370,7 @@ impl Default for Settings {
                 rank_tie_deg: 0.02,
                 same_render: 1e-4,
                 yaw_refine_deg: 0.5,
+                label_scan_deg: 2.5,
                 rival_rank_deg: 1.0,
             },
             lighting: LightingSettings {

@@ -1,0 +1,227 @@
+//! The turn of a patterned probe about its axis, told by its shading: the
+//! photo divided by the probe's albedo is, at the right turn, the lighting's
+//! reflection alone; at a wrong turn the label's edges stay in it (the
+//! photo's) and appear in it (the model's, divided out where the photo has
+//! none). The chromatic total variation of `log(photo / albedo)` over
+//! neighbouring probe pixels measures this without any lighting: the
+//! coarse map that ranks turns by colour bakes a label into its light and
+//! can rank a turn 20 to 150 degrees off first (docs/results.md 12.6).
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use render::accel::Accel;
+use render::pose::Pose;
+
+use super::Probe;
+use super::hypotheses;
+use super::photo::Photo;
+use super::settings::OrientationSettings;
+use crate::objective::mask_mean_luminance;
+
+/// The label variation of a probe's turns in one photo: the mesh's BVH in
+/// its own frame (a pose moves the camera's rays, not the mesh), and the
+/// photo's blocks it reads.
+pub(super) struct LabelVariation<'a> {
+    probe: &'a Probe<'a>,
+    photo: &'a Photo,
+    accel: Accel,
+    /// The blocks read (column, row of blocks): every pixel inside the
+    /// mask and not clipped.
+    blocks: Vec<(usize, usize)>,
+    /// Each block's mean photo colour.
+    photo_means: Vec<[f32; 3]>,
+    /// Added to the photo's channels before the log: a dark pixel's noise
+    /// would otherwise dominate (a fraction of the mask's mean level).
+    dark: f32,
+}
+
+/// The share of the mask's mean level added to the photo's channels before
+/// their log.
+const DARK_SHARE: f64 = 0.01;
+/// Added to the albedo's channels before their log (albedos are in [0, 1]).
+const DARK_ALBEDO: f32 = 0.01;
+/// The side (pixels) of the blocks compared: a pose a pixel or two off
+/// (the outline's fit) moves a label's edges within a block, not out of it.
+const BLOCK: usize = 3;
+/// Where a pixel's albedo is sampled (2x2): averaged over the pixel, as
+/// the photo is.
+const SUBPIXELS: [Vec2; 4] = [
+    Vec2::new(0.25, 0.25),
+    Vec2::new(0.75, 0.25),
+    Vec2::new(0.25, 0.75),
+    Vec2::new(0.75, 0.75),
+];
+
+impl<'a> LabelVariation<'a> {
+    pub(super) fn new(probe: &'a Probe<'a>, photo: &'a Photo, clipped: &[bool]) -> crate::error::Result<Self> {
+        let (w, h) = (photo.mask.width, photo.mask.height);
+        let usable = |i: usize| photo.mask.inside[i] && !clipped[i];
+        let blocks: Vec<(usize, usize)> = (0..h / BLOCK)
+            .flat_map(|by| (0..w / BLOCK).map(move |bx| (bx, by)))
+            .filter(|&(bx, by)| block_pixels(bx, by, w).all(usable))
+            .collect();
+        let photo_means = blocks
+            .iter()
+            .map(|&(bx, by)| {
+                let mut sum = [0.0f32; 3];
+                for i in block_pixels(bx, by, w) {
+                    (0..3).for_each(|c| sum[c] += photo.image.pixels[i][c]);
+                }
+                sum.map(|v| v / (BLOCK * BLOCK) as f32)
+            })
+            .collect();
+        let level = mask_mean_luminance(&photo.image, &photo.mask)?;
+        Ok(LabelVariation {
+            probe,
+            photo,
+            accel: Accel::new(&probe.asset.mesh),
+            blocks,
+            photo_means,
+            dark: (DARK_SHARE * level) as f32,
+        })
+    }
+
+    /// The probe's albedo averaged over pixel `i` at the pose `to_mesh`
+    /// inverts, with Schlick's Fresnel (towards white at grazing, as the
+    /// photo is); None where a ray misses the probe.
+    fn albedo(&self, i: usize, to_mesh: &glam::Mat4) -> Option<[f32; 3]> {
+        let (camera, mesh) = (&self.photo.camera, &self.probe.asset.mesh);
+        let w = self.photo.mask.width;
+        let mut albedo = [0.0f32; 3];
+        for offset in SUBPIXELS {
+            let (origin, direction) = camera.primary_ray((i / w) as u32, (i % w) as u32, offset);
+            let (o, d) = (to_mesh.transform_point3(origin), to_mesh.transform_vector3(direction));
+            let hit = self.accel.closest_hit(o, d, f32::INFINITY)?;
+            let t = hit.triangle as usize;
+            let f0 = self
+                .probe
+                .asset
+                .albedo
+                .lookup(mesh.interpolate(&mesh.uvs, t, hit.barycentric));
+            let normal = mesh.interpolate(&mesh.normals, t, hit.barycentric).normalize_or_zero();
+            let grazing = (1.0 - normal.dot(d.normalize()).abs()).clamp(0.0, 1.0).powi(5);
+            (0..3).for_each(|c| albedo[c] += f0[c] + (1.0 - f0[c]) * grazing);
+        }
+        Some(albedo.map(|a| a / SUBPIXELS.len() as f32))
+    }
+
+    /// The mean over neighbouring block pairs (right and below) of the L1
+    /// difference of the chromatic part of `log(photo / albedo)`: each
+    /// block's log ratio less its mean over the channels. Infinite when no
+    /// pair is read.
+    pub(super) fn at(&self, pose: &Pose) -> f64 {
+        let to_mesh = pose.to_world().inverse();
+        let w = self.photo.mask.width;
+        let (bw, bh) = (w / BLOCK, self.photo.mask.height / BLOCK);
+        let mut chroma = vec![None; bw * bh];
+        for (&(bx, by), photo) in self.blocks.iter().zip(&self.photo_means) {
+            let mut albedo = [0.0f32; 3];
+            let mut whole = true;
+            for i in block_pixels(bx, by, w) {
+                match self.albedo(i, &to_mesh) {
+                    Some(a) => (0..3).for_each(|c| albedo[c] += a[c] / (BLOCK * BLOCK) as f32),
+                    None => whole = false,
+                }
+            }
+            if whole {
+                let log = [0, 1, 2].map(|c| (photo[c] + self.dark).ln() - (albedo[c] + DARK_ALBEDO).ln());
+                let mean = (log[0] + log[1] + log[2]) / 3.0;
+                chroma[by * bw + bx] = Some(Vec3::from(log.map(|l| l - mean)));
+            }
+        }
+        let (mut sum, mut pairs) = (0.0f64, 0usize);
+        for (k, a) in chroma.iter().enumerate() {
+            let Some(a) = a else { continue };
+            let right = (k % bw + 1 < bw).then(|| chroma[k + 1]).flatten();
+            let below = chroma.get(k + bw).copied().flatten();
+            for b in [right, below].into_iter().flatten() {
+                sum += (*a - b).abs().element_sum() as f64;
+                pairs += 1;
+            }
+        }
+        match pairs {
+            0 => f64::INFINITY,
+            n => sum / n as f64,
+        }
+    }
+
+    /// The turn (degrees, about the probe's axis) of `pose` of least label
+    /// variation: every `OrientationSettings::label_scan_deg` round the
+    /// circle, then halving steps about the best down to
+    /// `OrientationSettings::yaw_refine_deg`. Returns the turn and its
+    /// variation.
+    pub(super) fn best_turn(&self, pose: &Pose, o: &OrientationSettings) -> (f32, f64) {
+        let mesh = &self.probe.asset.mesh;
+        let at = |turn: f32| self.at(&hypotheses::turned(pose, mesh, turn));
+        let step = o.label_scan_deg.max(o.yaw_refine_deg);
+        let scan: Vec<f32> = (0..(360.0 / step).ceil() as usize).map(|k| k as f32 * step).collect();
+        let scores: Vec<f64> = scan.par_iter().map(|&t| at(t)).collect();
+        let (mut best, mut score) = scan
+            .iter()
+            .zip(&scores)
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(&t, &s)| (t, s))
+            .expect("at least one turn");
+        let mut step = 0.5 * step;
+        while step >= o.yaw_refine_deg {
+            let (lower, upper) = rayon::join(|| at(best - step), || at(best + step));
+            for (t, s) in [(best - step, lower), (best + step, upper)] {
+                if s < score {
+                    (best, score) = (t, s);
+                }
+            }
+            step *= 0.5;
+        }
+        (best, score)
+    }
+}
+
+/// The row-major indices of block (`bx`, `by`)'s pixels in an image `w` wide.
+fn block_pixels(bx: usize, by: usize, w: usize) -> impl Iterator<Item = usize> {
+    (0..BLOCK * BLOCK).map(move |k| (by * BLOCK + k / BLOCK) * w + bx * BLOCK + k % BLOCK)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Quat;
+    use render::camera::Camera;
+    use render::envmap::EnvMap;
+    use render::procedural::SodaCan;
+
+    use super::*;
+    use crate::estimate::Settings;
+    use crate::estimate::testing::{photo_of, probe_of};
+
+    #[test]
+    fn a_label_s_turn_is_told_by_the_shading_alone() {
+        // The procedural can (red and white label, a bare window) under the
+        // courtyard, 5,000 px: from its pose turned 100 deg and moved a
+        // pixel (the outline's fit), the scan finds the turn back.
+        let asset = SodaCan::default().build();
+        let probe = probe_of(&asset);
+        let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
+        let camera = Camera::new(
+            240,
+            180,
+            40.0,
+            Vec3::new(0.0, 0.12, 0.3),
+            Vec3::new(0.0, 0.06, 0.0),
+            Vec3::Y,
+        )
+        .expect("camera");
+        let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
+        let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
+        let photo = photo_of(&asset, &truth, camera, &env, 16);
+        let clipped = vec![false; photo.camera.pixel_count()];
+        let label = LabelVariation::new(&probe, &photo, &clipped).expect("a mask");
+        let o = Settings::default().orientation;
+        let off = hypotheses::turned(&truth, &asset.mesh, 100.0);
+        let off = Pose::new(off.rotation, off.scale, off.translation + Vec3::new(3e-4, 0.0, 0.0));
+        let (turn, score) = label.best_turn(&off, &o);
+        let back = (turn + 100.0 + 180.0).rem_euclid(360.0) - 180.0;
+        assert!(back.abs() < 2.0, "turned {turn} deg: {back} deg from the truth");
+        // The measure at the found turn against the start's: the label's
+        // edges divided out.
+        assert!(score < 0.8 * label.at(&off), "{score} vs {}", label.at(&off));
+    }
+}
