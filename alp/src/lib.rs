@@ -6,6 +6,7 @@
 //! folders written atomically, the probe catalogue, the declarative
 //! objective, the estimation, evaluation and the `alp` CLI.
 
+pub mod acquire;
 pub mod error;
 pub mod estimate;
 pub mod eval;

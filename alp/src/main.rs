@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use alp::relight::RelightSettings;
-use alp::synth::SynthSettings;
+use alp::synth::{CaptureSettings, SynthSettings};
 use alp::{Error, Result};
 use clap::{Parser, Subcommand};
 use render::bsdf::GgxMetal;
@@ -31,8 +31,9 @@ enum Command {
     Relight(RelightArgs),
     /// Relighting errors of an estimated env map (and pose errors of an estimated pose) against a scene's truth.
     Eval(EvalArgs),
-    /// Make a synthetic evaluation scene: a probe at a random pose, random camera, known lighting.
-    Synth(SynthArgs),
+    /// Make a synthetic evaluation scene: a probe at a random pose, random camera, known lighting
+    /// (or, `alp synth captures`, a capture folder of a known probe for its acquisition).
+    Synth(SynthCommand),
     /// Procedural probes.
     Probe {
         #[command(subcommand)]
@@ -107,6 +108,54 @@ struct EvalArgs {
 }
 
 #[derive(clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
+struct SynthCommand {
+    #[command(subcommand)]
+    what: Option<SynthWhat>,
+    #[command(flatten)]
+    scene: Option<SynthArgs>,
+}
+
+#[derive(Subcommand)]
+enum SynthWhat {
+    /// Render a capture folder of a known probe (FORMATS.md, "Capture folder"): views on rings
+    /// round it standing at the origin, as on a turntable; the mesh written in a random frame and
+    /// scale, its true mesh-to-world pose in true_pose.json.
+    Captures(CaptureArgs),
+}
+
+#[derive(clap::Args)]
+struct CaptureArgs {
+    /// Probe folder (probe.json), or a procedural probe name (can, cap, sphere).
+    #[arg(long)]
+    probe: PathBuf,
+    /// Environment map lighting every view (written to the capture as lighting.exr).
+    #[arg(long)]
+    env: PathBuf,
+    /// Number of views.
+    #[arg(long, default_value_t = 24)]
+    views: usize,
+    /// The capture folder to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Seed of every random choice (the scan's frame, the rings, the renders, the noise).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Relative standard deviation of multiplicative Gaussian noise.
+    #[arg(long, default_value_t = 0.0)]
+    noise: f32,
+    /// Samples per pixel of each view.
+    #[arg(long, default_value_t = 64)]
+    spp: u32,
+    /// Image width, pixels.
+    #[arg(long, default_value_t = 320)]
+    width: u32,
+    /// Image height, pixels.
+    #[arg(long, default_value_t = 240)]
+    height: u32,
+}
+
+#[derive(clap::Args)]
 struct SynthArgs {
     /// Probe folder (probe.json), or a procedural probe name (can, cap, sphere).
     #[arg(long)]
@@ -159,7 +208,15 @@ fn main() -> ExitCode {
         Command::Render(args) => render(&args),
         Command::Relight(args) => relight(&args),
         Command::Eval(args) => eval(&args),
-        Command::Synth(args) => synth(&args),
+        Command::Synth(SynthCommand {
+            what: Some(SynthWhat::Captures(args)),
+            ..
+        }) => synth_captures(&args),
+        Command::Synth(SynthCommand { scene: Some(args), .. }) => synth(&args),
+        Command::Synth(_) => Err(Error::invalid(
+            "alp synth",
+            "needs --probe, --env and --out (a scene), or `captures` (see alp synth --help)",
+        )),
         Command::Probe {
             action: ProbeAction::Make { kind, out },
         } => make_probe(&kind, &out),
@@ -243,6 +300,21 @@ fn synth(args: &SynthArgs) -> Result<()> {
     }
     let reference = alp::synth::probe_reference(&args.probe, &args.out)?;
     alp::synth::write_scene(&args.out, &scene, &env, &reference)
+}
+
+fn synth_captures(args: &CaptureArgs) -> Result<()> {
+    let probe = alp::probes::load(&args.probe)?;
+    let env = EnvMap::read(&args.env)?;
+    let settings = CaptureSettings {
+        seed: args.seed,
+        views: args.views,
+        noise: args.noise,
+        spp: args.spp,
+        width: args.width,
+        height: args.height,
+    };
+    let capture = alp::synth::synthesize_capture(&probe, &env, &settings)?;
+    alp::synth::write_capture(&args.out, &capture)
 }
 
 /// `image.exr` -> `image.png`.

@@ -1,5 +1,6 @@
 //! Synthetic evaluation scenes (FORMATS.md, "Scene folder"): a probe at a random pose, seen by a
-//! random camera, rendered under a known env map, with optional sensor noise and clipping.
+//! random camera, rendered under a known env map, with optional sensor noise and clipping; and
+//! synthetic capture folders of a known probe for its acquisition ("Capture folder").
 //!
 //! Every random choice comes from `render::sampling::Rng` streams of one seed, so a seed names a
 //! scene. The image has a black background: only the probe's pixels carry information.
@@ -19,7 +20,9 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::Rng;
 
+use crate::acquire::capture::{Capture, LEAST_VIEWS, View};
 use crate::error::{Error, Result};
+use crate::estimate::Photo;
 
 /// The probe's height in the image, as a fraction of the image height, is drawn from this range
 /// (120 to 230 px of a 480-px image: inside the 100-250 px of the evaluation protocol).
@@ -101,7 +104,7 @@ pub fn synthesize(probe: &ProbeAsset, env: &EnvMap, settings: &SynthSettings) ->
         &mut Rng::new(settings.seed, stream::CAMERA),
     )?;
     let (mut image, mask) = render_in_passes(probe, &pose, &camera, env, settings.spp, settings.seed);
-    apply_sensor(&mut image, settings);
+    apply_sensor(&mut image, settings.noise, settings.exposure_clip, settings.seed);
     Ok(SynthScene {
         image,
         mask,
@@ -196,6 +199,22 @@ pub fn random_camera(posed: &[Vec3], width: u32, height: u32, rng: &mut Rng) -> 
     // "Roughly" at the probe: the aim misses the centre by up to a tenth of the probe's size.
     let aim = centre + 0.1 * radius * Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5);
     let wanted_px = uniform(rng, PROBE_HEIGHT_FRACTION) * height as f32;
+    framed(posed, (width, height), fov_y_deg, towards_camera, aim, wanted_px)
+}
+
+/// The camera of `size` pixels and vertical field of view `fov_y_deg` looking at `aim` from the
+/// direction `towards_camera` (unit), with +Y up, at the distance where the points `posed` are
+/// `wanted_px` tall in the image.
+fn framed(
+    posed: &[Vec3],
+    (width, height): (u32, u32),
+    fov_y_deg: f32,
+    towards_camera: Vec3,
+    aim: Vec3,
+    wanted_px: f32,
+) -> Result<Camera> {
+    let (lo, hi) = bounds(posed);
+    let radius = 0.5 * (hi - lo).length();
     // Start where the bounding sphere fills the wanted height, then correct by the measured
     // height (inversely proportional to distance, up to perspective: a few rounds converge).
     let mut distance = radius / (0.5 * fov_y_deg.to_radians()).tan() * height as f32 / wanted_px;
@@ -218,6 +237,137 @@ pub fn random_camera(posed: &[Vec3], width: u32, height: u32, rng: &mut Rng) -> 
         aim,
         Vec3::Y,
     )?)
+}
+
+/// What `alp synth captures` varies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CaptureSettings {
+    /// Seed of the scan's frame, the rings' phases, the renders and the noise.
+    pub seed: u64,
+    /// Number of views, spread over [`CAPTURE_ELEVATIONS_DEG`]'s rings.
+    pub views: usize,
+    /// Relative standard deviation of the multiplicative Gaussian noise (0: none).
+    pub noise: f32,
+    /// Samples per pixel of each view.
+    pub spp: u32,
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+}
+
+impl Default for CaptureSettings {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            views: 24,
+            noise: 0.0,
+            spp: 64,
+            width: 320,
+            height: 240,
+        }
+    }
+}
+
+/// Elevations (degrees) of a capture's rings of cameras, as a turntable in a light box is shot;
+/// fewer than nine views use the first two.
+pub const CAPTURE_ELEVATIONS_DEG: [f32; 3] = [10.0, 30.0, 55.0];
+/// A capture's field of view (degrees) and the probe's height in it (share of the image height).
+pub const CAPTURE_FOV_Y_DEG: f32 = 35.0;
+pub const CAPTURE_PROBE_HEIGHT: f32 = 0.6;
+/// The scan's scale (its units per metre) is drawn from this range, log-uniform: a scan's units
+/// are arbitrary.
+pub const SCAN_SCALE: [f32; 2] = [0.2, 50.0];
+
+/// A synthetic capture, before it is written: the capture folder's contents and the truth.
+pub struct SynthCapture {
+    /// The mesh in a random frame and scale (the scan), the lighting and the views.
+    pub capture: Capture,
+    /// The scan's true mesh-to-world pose (the truth an acquisition is judged against).
+    pub to_world: Pose,
+}
+
+/// Renders `probe` under `env` standing upright at the origin of the world, as a turntable in a
+/// light box is shot: `settings.views` cameras on rings at [`CAPTURE_ELEVATIONS_DEG`] looking at
+/// it, the mesh written in a random frame and scale.
+pub fn synthesize_capture(probe: &ProbeAsset, env: &EnvMap, settings: &CaptureSettings) -> Result<SynthCapture> {
+    if settings.views < LEAST_VIEWS {
+        return Err(Error::invalid(
+            "--views",
+            format!("{}: a capture needs at least {LEAST_VIEWS}", settings.views),
+        ));
+    }
+    validate(&SynthSettings {
+        seed: settings.seed,
+        noise: settings.noise,
+        spp: settings.spp,
+        width: settings.width,
+        height: settings.height,
+        ..SynthSettings::default()
+    })?;
+    let mut rng = Rng::new(settings.seed, stream::POSE);
+    let pose = random_pose(probe, &mut rng, false);
+    let posed: Vec<Vec3> = probe.mesh.positions.iter().map(|&p| pose.transform_point(p)).collect();
+    let (lo, hi) = bounds(&posed);
+    let centre = 0.5 * (lo + hi);
+    // The scan's frame: any rotation, a log-uniform scale, an offset of a few of its sizes.
+    let scan_rotation = Quat::from_axis_angle(
+        Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize_or(Vec3::X),
+        2.0 * PI * rng.next_f32(),
+    );
+    let scan_scale = (SCAN_SCALE[0].ln() + (SCAN_SCALE[1] / SCAN_SCALE[0]).ln() * rng.next_f32()).exp();
+    let extent = (hi - lo).length() * scan_scale;
+    let scan_offset = extent * Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5);
+    let scan = Pose::new(scan_rotation, scan_scale, scan_offset);
+    // World from scan: the pose after the scan's inverse.
+    let rotation = pose.rotation * scan_rotation.inverse();
+    let scale = pose.scale / scan_scale;
+    let to_world = Pose::new(rotation, scale, pose.translation - scale * (rotation * scan_offset));
+    let rings = if settings.views < 9 {
+        2
+    } else {
+        CAPTURE_ELEVATIONS_DEG.len()
+    };
+    let phases: Vec<f32> = (0..rings).map(|_| 2.0 * PI * rng.next_f32()).collect();
+    let mut views = Vec::with_capacity(settings.views);
+    for k in 0..settings.views {
+        let ring = k % rings;
+        // The ring's share of the views, evenly round it from its phase.
+        let on_ring = (settings.views - ring).div_ceil(rings);
+        let azimuth = phases[ring] + 2.0 * PI * (k / rings) as f32 / on_ring as f32;
+        let elevation = CAPTURE_ELEVATIONS_DEG[ring].to_radians();
+        let towards_camera = Vec3::new(
+            elevation.cos() * azimuth.sin(),
+            elevation.sin(),
+            elevation.cos() * azimuth.cos(),
+        );
+        let size = (settings.width, settings.height);
+        let wanted_px = CAPTURE_PROBE_HEIGHT * settings.height as f32;
+        let camera = framed(&posed, size, CAPTURE_FOV_Y_DEG, towards_camera, centre, wanted_px)?;
+        let seed = settings.seed.wrapping_add((k as u64 + 1) << 48);
+        let (mut image, mask) = render_in_passes(probe, &pose, &camera, env, settings.spp, seed);
+        apply_sensor(&mut image, settings.noise, None, seed);
+        let name = format!("view_{k:03}");
+        let photo = Photo::new(image, mask, camera).map_err(|e| Error::invalid(name.clone(), e.rule()))?;
+        views.push(View { name, photo });
+    }
+    Ok(SynthCapture {
+        capture: Capture {
+            mesh: probe.mesh.posed(&scan),
+            lighting: env.clone(),
+            views,
+        },
+        to_world,
+    })
+}
+
+/// Writes a synthetic capture folder atomically: the capture's files, and `true_pose.json`, the
+/// scan's true mesh-to-world pose.
+pub fn write_capture(out: &Path, synth: &SynthCapture) -> Result<()> {
+    crate::output::write_folder_atomically(out, |dir| {
+        synth.capture.write(dir)?;
+        Ok(synth.to_world.write(dir.join("true_pose.json"))?)
+    })
 }
 
 /// `render_image` at `spp` samples per pixel, in passes of at most [`SPP_PER_PASS`] (the
@@ -259,16 +409,16 @@ fn render_in_passes(
 }
 
 /// Multiplicative noise `x (1 + noise g)` (g standard normal, per channel, floored at 0 so
-/// radiance stays non-negative), then clipping at `exposure_clip`.
-fn apply_sensor(image: &mut RgbImage, settings: &SynthSettings) {
+/// radiance stays non-negative; the random streams of `seed`), then clipping at `exposure_clip`.
+fn apply_sensor(image: &mut RgbImage, noise: f32, exposure_clip: Option<f32>, seed: u64) {
     for (p, rgb) in image.pixels.iter_mut().enumerate() {
-        if settings.noise > 0.0 {
-            let mut rng = Rng::new(settings.seed, stream::NOISE + p as u64);
+        if noise > 0.0 {
+            let mut rng = Rng::new(seed, stream::NOISE + p as u64);
             for v in rgb.iter_mut() {
-                *v *= (1.0 + settings.noise * standard_normal(&mut rng)).max(0.0);
+                *v *= (1.0 + noise * standard_normal(&mut rng)).max(0.0);
             }
         }
-        if let Some(clip) = settings.exposure_clip {
+        if let Some(clip) = exposure_clip {
             for v in rgb.iter_mut() {
                 *v = v.min(clip);
             }
@@ -386,7 +536,7 @@ mod tests {
             exposure_clip: Some(1.5),
             ..SynthSettings::default()
         };
-        apply_sensor(&mut image, &settings);
+        apply_sensor(&mut image, settings.noise, settings.exposure_clip, settings.seed);
         let values: Vec<f64> = image.pixels.iter().flatten().map(|&v| v as f64).collect();
         let mean = values.iter().sum::<f64>() / values.len() as f64;
         let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64).sqrt();

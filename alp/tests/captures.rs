@@ -1,0 +1,185 @@
+//! `alp synth captures` writes a capture folder that `Capture::read` reads back, with the
+//! scan's true pose; every bad capture input is a clear error naming the view's file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use alp::acquire::capture::Capture;
+use render::envmap::EnvMap;
+use render::image_io::{Mask, RgbImage};
+use render::pose::Pose;
+
+fn alp(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_alp"))
+        .args(args)
+        .output()
+        .expect("run alp")
+}
+
+/// A fresh folder for one test, with the courtyard map at 16 rows.
+fn workspace(name: &str) -> (PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("alp-captures-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let courtyard = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
+    let env = dir.join("env.exr");
+    EnvMap::read(courtyard)
+        .expect("courtyard")
+        .downsample(16)
+        .write(&env)
+        .expect("write env");
+    (dir, env)
+}
+
+/// `alp synth captures` of the can, `views` views of 64x48 at 4 spp, into `out`.
+fn synth_captures(env: &Path, out: &Path, views: &str) -> Output {
+    let (env, out) = (env.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    alp(&[
+        "synth", "captures", "--probe", "can", "--env", env, "--views", views, "--out", out, "--width", "64",
+        "--height", "48", "--spp", "4", "--seed", "3",
+    ])
+}
+
+#[test]
+fn a_synthetic_capture_reads_back_with_the_scan_s_true_pose() {
+    let (dir, env) = workspace("roundtrip");
+    let out = dir.join("capture");
+    let run = synth_captures(&env, &out, "9");
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let capture = Capture::read(&out).expect("a capture");
+    assert_eq!(capture.views.len(), 9);
+    let names: Vec<&str> = capture.views.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names[0], "view_000");
+    assert!(names.windows(2).all(|w| w[0] < w[1]), "{names:?}");
+    // The scan's vertices, taken to the world by the true pose, project onto
+    // each view's mask: its bounding box within two pixels of theirs.
+    let to_world = Pose::read(out.join("true_pose.json")).expect("the true pose");
+    for view in &capture.views {
+        let (camera, mask) = (&view.photo.camera, &view.photo.mask);
+        let projected: Vec<_> = capture
+            .mesh
+            .positions
+            .iter()
+            .map(|&p| camera.project(to_world.transform_point(p)).expect("in front"))
+            .collect();
+        let (mut lo, mut hi) = (glam::Vec2::splat(f32::INFINITY), glam::Vec2::splat(f32::NEG_INFINITY));
+        projected.iter().for_each(|&q| (lo, hi) = (lo.min(q), hi.max(q)));
+        let inside: Vec<glam::Vec2> = (0..mask.inside.len())
+            .filter(|&i| mask.inside[i])
+            .map(|i| glam::Vec2::new((i % mask.width) as f32 + 0.5, (i / mask.width) as f32 + 0.5))
+            .collect();
+        let (mut mlo, mut mhi) = (glam::Vec2::splat(f32::INFINITY), glam::Vec2::splat(f32::NEG_INFINITY));
+        inside.iter().for_each(|&q| (mlo, mhi) = (mlo.min(q), mhi.max(q)));
+        assert!(
+            (lo - mlo).abs().max_element() < 2.0 && (hi - mhi).abs().max_element() < 2.0,
+            "{}: projected {lo}..{hi}, mask {mlo}..{mhi}",
+            view.name
+        );
+    }
+    // The scan is in a frame of its own: not the world's scale.
+    assert!((to_world.scale - 1.0).abs() > 0.01, "scale {}", to_world.scale);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_captures_are_clear_errors_naming_the_file() {
+    let (dir, env) = workspace("bad");
+    let good = dir.join("good");
+    let run = synth_captures(&env, &good, "3");
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    // Each case: a copy of the good capture, broken one way.
+    let case = |name: &str, break_it: &dyn Fn(&Path)| -> String {
+        let at = dir.join(name);
+        copy_dir(&good, &at);
+        break_it(&at);
+        let err = Capture::read(&at)
+            .err()
+            .unwrap_or_else(|| panic!("{name}: read a bad capture"));
+        err.to_string()
+    };
+    let view = |at: &Path| at.join("views").join("view_001");
+    let err = case("no_mask", &|at| {
+        std::fs::remove_file(view(at).join("mask.png")).expect("rm")
+    });
+    assert!(
+        err.contains("view_001") && err.contains("mask.png") && err.contains("missing"),
+        "{err}"
+    );
+    let err = case("small_mask", &|at| {
+        Mask::new(32, 24, vec![true; 32 * 24])
+            .write_png(view(at).join("mask.png"))
+            .expect("write")
+    });
+    assert!(
+        err.contains("view_001") && err.contains("mask.png") && err.contains("32x24"),
+        "{err}"
+    );
+    let err = case("empty_mask", &|at| {
+        Mask::new(64, 48, vec![false; 64 * 48])
+            .write_png(view(at).join("mask.png"))
+            .expect("write")
+    });
+    assert!(
+        err.contains("view_001") && err.contains("mask.png") && err.contains("0 pixels"),
+        "{err}"
+    );
+    let err = case("nan_image", &|at| {
+        let mut image = RgbImage::read_exr(view(at).join("image.exr")).expect("read");
+        image.pixels[100][1] = f32::NAN;
+        image.write_exr(view(at).join("image.exr")).expect("write")
+    });
+    assert!(
+        err.contains("view_001") && err.contains("image.exr") && err.contains("NaN"),
+        "{err}"
+    );
+    let err = case("no_vt", &|at| {
+        let obj = std::fs::read_to_string(at.join("mesh.obj")).expect("read");
+        let stripped: String = obj
+            .lines()
+            .filter(|l| !l.starts_with("vt "))
+            .map(|l| match l.strip_prefix("f ") {
+                Some(face) => {
+                    let corners: Vec<String> = face
+                        .split_whitespace()
+                        .map(|c| c.split('/').next().expect("v").to_string())
+                        .collect();
+                    format!("f {}\n", corners.join(" "))
+                }
+                None => format!("{l}\n"),
+            })
+            .collect();
+        std::fs::write(at.join("mesh.obj"), stripped).expect("write")
+    });
+    assert!(err.contains("mesh.obj") && err.contains("vt"), "{err}");
+    let err = case("one_view", &|at| {
+        for v in ["view_001", "view_002"] {
+            std::fs::remove_dir_all(at.join("views").join(v)).expect("rm");
+        }
+    });
+    assert!(err.contains("views") && err.contains("at least 2"), "{err}");
+    let err = case("bad_lighting", &|at| {
+        std::fs::write(at.join("lighting.exr"), b"not an exr").expect("write")
+    });
+    assert!(err.contains("lighting.exr"), "{err}");
+    // A capture command that cannot be met writes nothing.
+    let none = dir.join("none");
+    let run = synth_captures(&env, &none, "1");
+    assert!(!run.status.success() && !none.exists());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--views"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Copies the folder `from` (files and folders) to `to`.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for entry in std::fs::read_dir(from).expect("ls") {
+        let entry = entry.expect("entry");
+        let target = to.join(entry.file_name());
+        match entry.path().is_dir() {
+            true => copy_dir(&entry.path(), &target),
+            false => {
+                std::fs::copy(entry.path(), &target).expect("cp");
+            }
+        }
+    }
+}
