@@ -1,35 +1,16 @@
 //! `alp synth captures` writes a capture folder that `Capture::read` reads back, with the
 //! scan's true pose; every bad capture input is a clear error naming the view's file.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use std::path::Path;
+use std::process::Output;
+
+use common::{alp, workspace};
 
 use alp::acquire::capture::Capture;
-use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 use render::pose::Pose;
-
-fn alp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_alp"))
-        .args(args)
-        .output()
-        .expect("run alp")
-}
-
-/// A fresh folder for one test, with the courtyard map at 16 rows.
-fn workspace(name: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("alp-captures-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let courtyard = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
-    let env = dir.join("env.exr");
-    EnvMap::read(courtyard)
-        .expect("courtyard")
-        .downsample(16)
-        .write(&env)
-        .expect("write env");
-    (dir, env)
-}
 
 /// `alp synth captures` of the can, `views` views of 64x48 at 4 spp, into `out`.
 fn synth_captures(env: &Path, out: &Path, views: &str) -> Output {
@@ -42,7 +23,7 @@ fn synth_captures(env: &Path, out: &Path, views: &str) -> Output {
 
 #[test]
 fn a_synthetic_capture_reads_back_with_the_scan_s_true_pose() {
-    let (dir, env) = workspace("roundtrip");
+    let (dir, env) = workspace("roundtrip", 16);
     let out = dir.join("capture");
     let run = synth_captures(&env, &out, "9");
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
@@ -83,7 +64,7 @@ fn a_synthetic_capture_reads_back_with_the_scan_s_true_pose() {
 
 #[test]
 fn bad_captures_are_clear_errors_naming_the_file() {
-    let (dir, env) = workspace("bad");
+    let (dir, env) = workspace("bad", 16);
     let good = dir.join("good");
     let run = synth_captures(&env, &good, "3");
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));

@@ -1,35 +1,17 @@
 //! `alp synth` writes a complete scene folder that `alp eval` reads, and both fail clearly on bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+
+use std::path::Path;
+use std::process::Output;
+
+use common::{alp, workspace};
 
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 
-fn alp(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_alp"))
-        .args(args)
-        .output()
-        .expect("run alp")
-}
-
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// A fresh folder for one test, holding the courtyard map box-filtered to 32 rows (fast to relight).
-fn workspace(name: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("alp-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let courtyard = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
-    let env = dir.join("env.exr");
-    EnvMap::read(courtyard)
-        .expect("courtyard")
-        .downsample(32)
-        .write(&env)
-        .expect("write env");
-    (dir, env)
 }
 
 fn synth(env: &Path, out: &Path, extra: &[&str]) -> Output {
@@ -63,7 +45,7 @@ fn estimate(scene: &Path, out: &Path, extra: &[&str]) -> Output {
 
 #[test]
 fn synth_writes_a_scene_that_eval_reads() {
-    let (dir, env) = workspace("synth-eval");
+    let (dir, env) = workspace("synth-eval", 32);
     let scene = dir.join("scene");
     let out = synth(&env, &scene, &["--seed", "3", "--tilted", "--noise", "0.02"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -185,7 +167,7 @@ fn synth_writes_a_scene_that_eval_reads() {
 
 #[test]
 fn synth_rejects_an_unknown_probe_and_writes_nothing() {
-    let (dir, env) = workspace("synth-bad-probe");
+    let (dir, env) = workspace("synth-bad-probe", 32);
     let scene = dir.join("scene");
     let out = alp(&[
         "synth",
@@ -208,7 +190,7 @@ fn synth_rejects_an_unknown_probe_and_writes_nothing() {
 
 #[test]
 fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
-    let (dir, env) = workspace("estimate-objective");
+    let (dir, env) = workspace("estimate-objective", 32);
     let scene = dir.join("scene");
     assert!(synth(&env, &scene, &["--seed", "5"]).status.success());
     let estimate = |objective: &Path, out: &Path| {
@@ -267,7 +249,7 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
 
 #[test]
 fn estimate_memory_stays_flat_from_one_phase_to_the_next() {
-    let (dir, env) = workspace("estimate-memory");
+    let (dir, env) = workspace("estimate-memory", 32);
     let scene = dir.join("scene");
     let out = synth_sized(&env, &scene, ("160", "120"), &["--seed", "7"]);
     assert!(out.status.success(), "{}", stderr(&out));

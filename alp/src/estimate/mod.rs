@@ -221,6 +221,21 @@ mod testing {
         }
     }
 
+    /// The procedural can turned 0.3 rad about its axis, and its photo of
+    /// `width x height` from `eye`, looking at its middle, under the
+    /// courtyard (32 rows), 16 samples per pixel: its label and the light
+    /// tell its turn.
+    pub(super) fn can_in_the_courtyard(width: u32, height: u32, eye: glam::Vec3) -> (ProbeAsset, Pose, Photo) {
+        use glam::{Quat, Vec3};
+        let asset = render::procedural::SodaCan::default().build();
+        let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
+        let camera = Camera::new(width, height, 40.0, eye, Vec3::new(0.0, 0.06, 0.0), Vec3::Y).expect("camera");
+        let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
+        let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
+        let photo = photo_of(&asset, &truth, camera, &env, 16);
+        (asset, truth, photo)
+    }
+
     /// A photo of `asset` at `truth` through `camera` under `env`, `spp`
     /// samples per pixel.
     pub(super) fn photo_of(asset: &ProbeAsset, truth: &Pose, camera: Camera, env: &EnvMap, spp: u32) -> Photo {

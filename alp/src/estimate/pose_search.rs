@@ -534,30 +534,15 @@ pub(super) fn photo_refines(photo: &Photo, settings: &Settings) -> bool {
 mod tests {
     use super::*;
     use crate::estimate::Quality;
-    use crate::estimate::testing::{photo_of, probe_of};
-    use glam::{Quat, Vec3};
-    use render::envmap::EnvMap;
-    use render::procedural::SodaCan;
+    use crate::estimate::testing::{can_in_the_courtyard, probe_of};
+    use glam::Vec3;
 
     #[test]
     fn the_photo_refines_a_small_can_s_axis_searching_its_lean_sway_and_turn_in_turn() {
-        let asset = SodaCan::default().build();
+        // A can of 1,713 px in a 160x120 photo: its label and the light
+        // tell its pose, its outline hardly.
+        let (asset, truth, photo) = can_in_the_courtyard(160, 120, Vec3::new(0.0, 0.15, 0.35));
         let probe = probe_of(&asset);
-        // A can of 1,713 px in a 160x120 photo, under the courtyard: its
-        // label and the light tell its pose, its outline hardly.
-        let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
-        let camera = Camera::new(
-            160,
-            120,
-            40.0,
-            Vec3::new(0.0, 0.15, 0.35),
-            Vec3::new(0.0, 0.06, 0.0),
-            Vec3::Y,
-        )
-        .expect("camera");
-        let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
-        let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
-        let photo = photo_of(&asset, &truth, camera, &env, 16);
         let settings = Settings::new(Quality::Default);
         assert!(photo_refines(&photo, &settings), "{} px", photo.mask.count());
         // Off as the outline leaves a small probe: leaned 1.5 deg, swayed

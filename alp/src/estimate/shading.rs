@@ -183,35 +183,17 @@ fn block_pixels(bx: usize, by: usize, w: usize) -> impl Iterator<Item = usize> {
 
 #[cfg(test)]
 mod tests {
-    use glam::Quat;
-    use render::camera::Camera;
-    use render::envmap::EnvMap;
-    use render::procedural::SodaCan;
-
     use super::*;
     use crate::estimate::Settings;
-    use crate::estimate::testing::{photo_of, probe_of};
+    use crate::estimate::testing::{can_in_the_courtyard, probe_of};
 
     #[test]
     fn a_label_s_turn_is_told_by_the_shading_alone() {
-        // The procedural can (red and white label, a bare window) under the
-        // courtyard, 5,000 px: from its pose turned 100 deg and moved a
-        // pixel (the outline's fit), the scan finds the turn back.
-        let asset = SodaCan::default().build();
+        // The procedural can (red and white label, a bare window), 5,000 px:
+        // from its pose turned 100 deg and moved a pixel (the outline's
+        // fit), the scan finds the turn back.
+        let (asset, truth, photo) = can_in_the_courtyard(240, 180, Vec3::new(0.0, 0.12, 0.3));
         let probe = probe_of(&asset);
-        let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
-        let camera = Camera::new(
-            240,
-            180,
-            40.0,
-            Vec3::new(0.0, 0.12, 0.3),
-            Vec3::new(0.0, 0.06, 0.0),
-            Vec3::Y,
-        )
-        .expect("camera");
-        let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
-        let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
-        let photo = photo_of(&asset, &truth, camera, &env, 16);
         let clipped = vec![false; photo.camera.pixel_count()];
         let label = LabelVariation::new(&probe, &photo, &clipped).expect("a mask");
         let o = Settings::default().orientation;
