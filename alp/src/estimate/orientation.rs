@@ -331,7 +331,12 @@ impl Ranker<'_> {
         // A probe with a pattern of colours takes the turn its shading tells
         // (lighting-free); the photo then judges only its other end.
         let label = match !symmetric && self.ctx.probe.colours_alike != Some(true) {
-            true => Some(LabelVariation::new(self.ctx.probe, self.ctx.photo, self.ctx.clipped)?),
+            true => Some(LabelVariation::new(
+                self.ctx.probe,
+                self.ctx.photo,
+                self.ctx.clipped,
+                o,
+            )?),
             false => None,
         };
         let chosen = match &label {

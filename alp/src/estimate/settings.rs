@@ -198,6 +198,10 @@ pub struct OrientationSettings {
     /// down to `yaw_refine_deg`: finer finds a narrow minimum, at one
     /// ray-traced albedo image per turn.
     pub label_scan_deg: f32,
+    /// The side (pixels) of the blocks the label variation compares: a
+    /// pose a pixel or two off (the outline's fit) keeps a label's edge
+    /// within a block, against the detail a block averages away.
+    pub label_block_px: usize,
     /// A start within this RGB angle (degrees) of the chosen one's, at the
     /// other end or half a turn away, is a rival the photo judges.
     pub rival_rank_deg: f64,
@@ -371,6 +375,7 @@ impl Default for Settings {
                 same_render: 1e-4,
                 yaw_refine_deg: 0.5,
                 label_scan_deg: 2.5,
+                label_block_px: 3,
                 rival_rank_deg: 1.0,
             },
             lighting: LightingSettings {

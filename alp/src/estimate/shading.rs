@@ -25,6 +25,9 @@ pub(super) struct LabelVariation<'a> {
     probe: &'a Probe<'a>,
     photo: &'a Photo,
     accel: Accel,
+    /// The side (pixels) of the blocks compared
+    /// (`OrientationSettings::label_block_px`).
+    block: usize,
     /// The blocks read (column, row of blocks): every pixel inside the
     /// mask and not clipped.
     blocks: Vec<(usize, usize)>,
@@ -40,9 +43,6 @@ pub(super) struct LabelVariation<'a> {
 const DARK_SHARE: f64 = 0.01;
 /// Added to the albedo's channels before their log (albedos are in [0, 1]).
 const DARK_ALBEDO: f32 = 0.01;
-/// The side (pixels) of the blocks compared: a pose a pixel or two off
-/// (the outline's fit) moves a label's edges within a block, not out of it.
-const BLOCK: usize = 3;
 /// Where a pixel's albedo is sampled (2x2): averaged over the pixel, as
 /// the photo is.
 const SUBPIXELS: [Vec2; 4] = [
@@ -53,21 +53,27 @@ const SUBPIXELS: [Vec2; 4] = [
 ];
 
 impl<'a> LabelVariation<'a> {
-    pub(super) fn new(probe: &'a Probe<'a>, photo: &'a Photo, clipped: &[bool]) -> crate::error::Result<Self> {
+    pub(super) fn new(
+        probe: &'a Probe<'a>,
+        photo: &'a Photo,
+        clipped: &[bool],
+        o: &OrientationSettings,
+    ) -> crate::error::Result<Self> {
         let (w, h) = (photo.mask.width, photo.mask.height);
+        let block = o.label_block_px.max(1);
         let usable = |i: usize| photo.mask.inside[i] && !clipped[i];
-        let blocks: Vec<(usize, usize)> = (0..h / BLOCK)
-            .flat_map(|by| (0..w / BLOCK).map(move |bx| (bx, by)))
-            .filter(|&(bx, by)| block_pixels(bx, by, w).all(usable))
+        let blocks: Vec<(usize, usize)> = (0..h / block)
+            .flat_map(|by| (0..w / block).map(move |bx| (bx, by)))
+            .filter(|&(bx, by)| block_pixels(block, bx, by, w).all(usable))
             .collect();
         let photo_means = blocks
             .iter()
             .map(|&(bx, by)| {
                 let mut sum = [0.0f32; 3];
-                for i in block_pixels(bx, by, w) {
+                for i in block_pixels(block, bx, by, w) {
                     (0..3).for_each(|c| sum[c] += photo.image.pixels[i][c]);
                 }
-                sum.map(|v| v / (BLOCK * BLOCK) as f32)
+                sum.map(|v| v / (block * block) as f32)
             })
             .collect();
         let level = mask_mean_luminance(&photo.image, &photo.mask)?;
@@ -75,6 +81,7 @@ impl<'a> LabelVariation<'a> {
             probe,
             photo,
             accel: Accel::new(&probe.asset.mesh),
+            block,
             blocks,
             photo_means,
             dark: (DARK_SHARE * level) as f32,
@@ -112,14 +119,15 @@ impl<'a> LabelVariation<'a> {
     pub(super) fn at(&self, pose: &Pose) -> f64 {
         let to_mesh = pose.to_world().inverse();
         let w = self.photo.mask.width;
-        let (bw, bh) = (w / BLOCK, self.photo.mask.height / BLOCK);
+        let block = self.block;
+        let (bw, bh) = (w / block, self.photo.mask.height / block);
         let mut chroma = vec![None; bw * bh];
         for (&(bx, by), photo) in self.blocks.iter().zip(&self.photo_means) {
             let mut albedo = [0.0f32; 3];
             let mut whole = true;
-            for i in block_pixels(bx, by, w) {
+            for i in block_pixels(block, bx, by, w) {
                 match self.albedo(i, &to_mesh) {
-                    Some(a) => (0..3).for_each(|c| albedo[c] += a[c] / (BLOCK * BLOCK) as f32),
+                    Some(a) => (0..3).for_each(|c| albedo[c] += a[c] / (block * block) as f32),
                     None => whole = false,
                 }
             }
@@ -176,9 +184,10 @@ impl<'a> LabelVariation<'a> {
     }
 }
 
-/// The row-major indices of block (`bx`, `by`)'s pixels in an image `w` wide.
-fn block_pixels(bx: usize, by: usize, w: usize) -> impl Iterator<Item = usize> {
-    (0..BLOCK * BLOCK).map(move |k| (by * BLOCK + k / BLOCK) * w + bx * BLOCK + k % BLOCK)
+/// The row-major indices of the pixels of block (`bx`, `by`), `side`
+/// pixels square, in an image `w` wide.
+fn block_pixels(side: usize, bx: usize, by: usize, w: usize) -> impl Iterator<Item = usize> {
+    (0..side * side).map(move |k| (by * side + k / side) * w + bx * side + k % side)
 }
 
 #[cfg(test)]
@@ -195,8 +204,8 @@ mod tests {
         let (asset, truth, photo) = can_in_the_courtyard(240, 180, Vec3::new(0.0, 0.12, 0.3));
         let probe = probe_of(&asset);
         let clipped = vec![false; photo.camera.pixel_count()];
-        let label = LabelVariation::new(&probe, &photo, &clipped).expect("a mask");
         let o = Settings::default().orientation;
+        let label = LabelVariation::new(&probe, &photo, &clipped, &o).expect("a mask");
         let off = hypotheses::turned(&truth, &asset.mesh, 100.0);
         let off = Pose::new(off.rotation, off.scale, off.translation + Vec3::new(3e-4, 0.0, 0.0));
         let (turn, score) = label.best_turn(&off, &o);
