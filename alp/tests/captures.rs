@@ -9,6 +9,7 @@ use std::process::Output;
 use common::{alp, workspace};
 
 use alp::acquire::capture::Capture;
+use alp::acquire::placement::{PlacementSettings, place};
 use render::image_io::{Mask, RgbImage};
 use render::pose::Pose;
 
@@ -163,4 +164,44 @@ fn copy_dir(from: &Path, to: &Path) {
             }
         }
     }
+}
+
+#[test]
+fn the_scan_is_placed_from_the_silhouettes_alone() {
+    // The can's scan in a random frame and scale, 8 views of 96x72: its
+    // axis, centre and size in the cameras' frame come back (its turn
+    // about the axis does not show in silhouettes).
+    let (dir, env) = workspace("captures-place", 16);
+    let out = dir.join("capture");
+    let (env_s, out_s) = (env.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let run = alp(&[
+        "synth", "captures", "--probe", "can", "--env", env_s, "--views", "8", "--out", out_s, "--width", "96",
+        "--height", "72", "--spp", "4", "--seed", "5",
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let capture = Capture::read(&out).expect("a capture");
+    let truth = Pose::read(out.join("true_pose.json")).expect("the true pose");
+    let t0 = std::time::Instant::now();
+    let placed = place(&capture, &PlacementSettings::default()).expect("a placement");
+    let found = placed.to_world;
+    // The scan's axis in its own frame, taken to the world by each pose.
+    let to_y = alp::estimate::symmetry::axis_to_y(&capture.mesh, &alp::estimate::Settings::default().symmetry);
+    let scan_axis = to_y.inverse() * glam::Vec3::Y;
+    let axis = |p: &Pose| p.rotation * scan_axis;
+    let axis_deg = axis(&found).dot(axis(&truth)).abs().min(1.0).acos().to_degrees();
+    let (lo, hi) = capture.mesh.bounds();
+    let middle = 0.5 * (lo + hi);
+    let size = truth.scale * (hi - lo).length();
+    let centre_off = (found.transform_point(middle) - truth.transform_point(middle)).length() / size;
+    let scale_ratio = found.scale / truth.scale;
+    eprintln!(
+        "axis {axis_deg:.2} deg, centre {:.2} % of the size, scale x{scale_ratio:.4}, loss {:.5}, {:.1} s",
+        100.0 * centre_off,
+        placed.loss,
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(axis_deg < 2.0, "axis {axis_deg} deg off");
+    assert!(centre_off < 0.02, "centre {centre_off} of the size off");
+    assert!((scale_ratio - 1.0).abs() < 0.01, "scale x{scale_ratio}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

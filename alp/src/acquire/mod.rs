@@ -4,3 +4,4 @@
 //! `alp synth captures` renders for a known probe.
 
 pub mod capture;
+pub mod placement;

@@ -81,7 +81,7 @@ impl PoseContext<'_> {
 
 /// How a pose phase's Adam steps.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum PoseSteps {
+pub(crate) enum PoseSteps {
     /// Its full step throughout: a fit from a start.
     Full,
     /// A quarter of it, annealed (cosine) to a twentieth of that: the
@@ -93,7 +93,7 @@ pub(super) enum PoseSteps {
 
 /// Adam over the 8 pose parameters: per parameter kind its own step size
 /// (rotation quaternion, translation in metres scaled by the depth, log scale).
-pub(super) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps, outline: &OutlineSettings) -> Result<Adam> {
+pub(crate) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps, outline: &OutlineSettings) -> Result<Adam> {
     let (factor, last) = match steps {
         PoseSteps::Full => (1.0, 1.0),
         PoseSteps::Polish => (outline.polish_step, outline.polish_last),

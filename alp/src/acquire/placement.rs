@@ -1,0 +1,221 @@
+//! The scan's pose and size in the cameras' frame, from every view's
+//! silhouette: the first step of the acquisition (PAPER.md, Sec. 3.2). A
+//! scan comes in any frame and at any scale, so the fit starts from the
+//! views themselves: the centre where the rays through the masks' centres
+//! meet, the size at which the scan's bounding sphere spans the masks, and
+//! its axis (of revolution, else of its spread: `symmetry::axis_to_y`)
+//! pointed in directions spread over the sphere. Each start is fitted by
+//! Adam on the soft masks' L1 and Chamfer losses summed over the views; the
+//! best few are fitted on, and the best kept. A turn about an axis of
+//! revolution does not show in silhouettes: the texture solve takes it up.
+
+use glam::{DVec3, Quat, Vec3};
+use rayon::prelude::*;
+
+use autodiff::Tape;
+use optim::Solver;
+use render::camera::Camera;
+use render::mesh::{EdgeAdjacency, Mesh};
+use render::pose::Pose;
+use render::posed::{MeshVars, PoseVars, PosedMesh, pack_pose, unpack_pose};
+use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings, mask_barycenter};
+
+use super::capture::Capture;
+use crate::error::{Error, Result};
+use crate::estimate::Settings;
+use crate::estimate::settings::OutlineSettings;
+use crate::estimate::silhouette::{PoseSteps, pose_adam};
+use crate::estimate::symmetry;
+
+/// What the placement trades.
+#[derive(Clone, Debug)]
+pub struct PlacementSettings {
+    /// Axis directions tried, spread evenly over the sphere: more find a
+    /// scan in an odd frame more surely, at one short fit each.
+    pub axes: usize,
+    /// Adam iterations of each start's fit.
+    pub start_iters: usize,
+    /// Starts fitted on (the best by their short fit's loss).
+    pub kept: usize,
+    /// Adam iterations of a kept start's fit.
+    pub final_iters: usize,
+}
+
+impl Default for PlacementSettings {
+    fn default() -> Self {
+        PlacementSettings {
+            axes: 26,
+            start_iters: 40,
+            kept: 3,
+            final_iters: 150,
+        }
+    }
+}
+
+/// The placement found: the scan's mesh-to-world pose and its loss (the
+/// views' mean of soft-mask L1 plus Chamfer).
+#[derive(Clone, Copy, Debug)]
+pub struct Placement {
+    pub to_world: Pose,
+    pub loss: f64,
+}
+
+/// The views' silhouettes as the fit reads them.
+struct Silhouettes<'a> {
+    mesh: &'a Mesh,
+    edges: EdgeAdjacency,
+    views: Vec<(&'a Camera, ReferenceMask)>,
+}
+
+impl Silhouettes<'_> {
+    /// The mean over the views of soft-mask L1 plus Chamfer (in image
+    /// diagonals) at the packed pose `x`, and its gradient into `g`; NaN
+    /// when the scan leaves a view.
+    fn loss(&self, x: &[f64], g: &mut [f64]) -> f64 {
+        let tape = Tape::<f64>::new();
+        let pose = PoseVars::new(&tape, x, true);
+        let mesh = MeshVars::new(&tape, self.mesh);
+        let posed = PosedMesh::new(&mesh, &pose);
+        let positions = posed.position_values();
+        let mut total = tape.constant(&[0.0]);
+        for (camera, reference) in &self.views {
+            let plan = match SilhouettePlan::with_edges(
+                self.mesh,
+                &self.edges,
+                &positions,
+                camera,
+                SilhouetteSettings::default(),
+            ) {
+                Ok(plan) => plan,
+                Err(_) => return f64::NAN,
+            };
+            let soft = plan.soft_mask(&posed);
+            let diagonal = ((camera.width as f64).powi(2) + (camera.height as f64).powi(2)).sqrt();
+            let (Ok(l1), Ok(chamfer)) = (soft.mask_l1(reference), soft.chamfer(reference)) else {
+                return f64::NAN;
+            };
+            total = total + l1 + chamfer * (1.0 / diagonal);
+        }
+        let total = total * (1.0 / self.views.len() as f64);
+        tape.backward(total);
+        g.copy_from_slice(&tape.grad(pose.params));
+        tape.item(total)
+    }
+
+    /// Adam from `start` for `iters` iterations: the pose and its loss.
+    fn fit(&self, start: &Pose, iters: usize, depth: f32, outline: &OutlineSettings) -> Result<(Pose, f64)> {
+        let mut adam = pose_adam(iters, depth, PoseSteps::Full, outline)?;
+        let mut objective = |x: &[f64], g: &mut [f64]| self.loss(x, g);
+        let state = adam
+            .minimize(&mut objective, pack_pose(start).to_vec())
+            .map_err(Error::solver("placement"))?;
+        Ok((unpack_pose(&state.best_x), state.best_value))
+    }
+}
+
+/// Places the capture's scan in the cameras' frame (see the module's
+/// description).
+pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Placement> {
+    let views: Vec<(&Camera, ReferenceMask)> = capture
+        .views
+        .iter()
+        .map(|v| Ok((&v.photo.camera, ReferenceMask::new(&v.photo.mask)?)))
+        .collect::<Result<_>>()?;
+    let silhouettes = Silhouettes {
+        mesh: &capture.mesh,
+        edges: EdgeAdjacency::new(&capture.mesh),
+        views,
+    };
+    let centre = rays_meet(capture)?;
+    let (lo, hi) = capture.mesh.bounds();
+    let (scan_centre, scan_radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
+    let scale = world_radius(capture, centre) / scan_radius.max(f32::MIN_POSITIVE);
+    let depth = capture
+        .views
+        .iter()
+        .map(|v| (v.photo.camera.origin - centre).length())
+        .sum::<f32>()
+        / capture.views.len() as f32;
+    let estimate = Settings::default();
+    let to_y = symmetry::axis_to_y(&capture.mesh, &estimate.symmetry);
+    let outline = estimate.outline;
+    let starts: Vec<Pose> = spread_directions(settings.axes)
+        .into_iter()
+        .map(|axis| {
+            let rotation = Quat::from_rotation_arc(Vec3::Y, axis) * to_y;
+            Pose::new(rotation, scale, centre - scale * (rotation * scan_centre))
+        })
+        .collect();
+    let mut fitted: Vec<(Pose, f64)> = starts
+        .par_iter()
+        .map(|start| silhouettes.fit(start, settings.start_iters, depth, &outline))
+        .collect::<Result<_>>()?;
+    fitted.retain(|(_, loss)| loss.is_finite());
+    fitted.sort_by(|a, b| a.1.total_cmp(&b.1));
+    fitted.truncate(settings.kept.max(1));
+    let best = fitted
+        .par_iter()
+        .map(|(pose, _)| silhouettes.fit(pose, settings.final_iters, depth, &outline))
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .filter(|(_, loss)| loss.is_finite())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .ok_or_else(|| Error::invalid("capture", "no start kept the scan in every view"))?;
+    Ok(Placement {
+        to_world: best.0,
+        loss: best.1,
+    })
+}
+
+/// The point nearest (least squares) to the rays through every view's mask
+/// centre: where the probe stands.
+fn rays_meet(capture: &Capture) -> Result<Vec3> {
+    let (mut a, mut b) = (glam::DMat3::ZERO, DVec3::ZERO);
+    for view in &capture.views {
+        let camera = &view.photo.camera;
+        let centre =
+            mask_barycenter(&view.photo.mask).ok_or_else(|| Error::invalid(view.name.clone(), "an empty mask"))?;
+        let d = camera.direction_through(centre.as_vec2()).as_dvec3().normalize();
+        let o = camera.origin.as_dvec3();
+        // (I - d d^T) (x - o) = 0 for each ray, summed.
+        let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += m;
+        b += m * o;
+    }
+    if a.determinant().abs() < 1e-12 {
+        return Err(Error::invalid(
+            "views",
+            "their rays through the masks are parallel: the cameras must look from different directions",
+        ));
+    }
+    Ok((a.inverse() * b).as_vec3())
+}
+
+/// The radius (world units) of a sphere at `centre` whose silhouette has
+/// the masks' mean area: the bounding sphere of a probe is larger than its
+/// silhouette, and the fit's log-scale closes the gap.
+fn world_radius(capture: &Capture, centre: Vec3) -> f32 {
+    let radii: Vec<f32> = capture
+        .views
+        .iter()
+        .map(|v| {
+            let camera = &v.photo.camera;
+            let focal_px = 0.5 * camera.height as f32 / (0.5 * camera.fov_y_deg.to_radians()).tan();
+            let mask_radius_px = (v.photo.mask.count() as f32 / std::f32::consts::PI).sqrt();
+            mask_radius_px / focal_px * (camera.origin - centre).length()
+        })
+        .collect();
+    radii.iter().sum::<f32>() / radii.len() as f32
+}
+
+/// `n` directions spread evenly over the sphere (a Fibonacci lattice).
+fn spread_directions(n: usize) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..n.max(1))
+        .map(|k| {
+            let y = 1.0 - 2.0 * (k as f32 + 0.5) / n.max(1) as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            Vec3::new(r * (golden * k as f32).cos(), y, r * (golden * k as f32).sin())
+        })
+        .collect()
+}
