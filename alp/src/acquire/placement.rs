@@ -69,12 +69,13 @@ struct Silhouettes<'a> {
 
 impl Silhouettes<'_> {
     /// The mean over the views of soft-mask L1 plus Chamfer (in image
-    /// diagonals) at the packed pose `x`, and its gradient into `g`; NaN
-    /// when the scan leaves a view.
-    fn loss(&self, x: &[f64], g: &mut [f64]) -> f64 {
-        let tape = Tape::<f64>::new();
-        let pose = PoseVars::new(&tape, x, true);
-        let mesh = MeshVars::new(&tape, self.mesh);
+    /// diagonals) at the packed pose `x`, recorded on `tape` (cleared: its
+    /// buffers are reused from call to call), and its gradient into `g`;
+    /// NaN when the scan leaves a view.
+    fn loss(&self, tape: &Tape<f64>, x: &[f64], g: &mut [f64]) -> f64 {
+        tape.clear();
+        let pose = PoseVars::new(tape, x, true);
+        let mesh = MeshVars::new(tape, self.mesh);
         let posed = PosedMesh::new(&mesh, &pose);
         let positions = posed.position_values();
         let mut total = tape.constant(&[0.0]);
@@ -105,7 +106,8 @@ impl Silhouettes<'_> {
     /// Adam from `start` for `iters` iterations: the pose and its loss.
     fn fit(&self, start: &Pose, iters: usize, depth: f32, outline: &OutlineSettings) -> Result<(Pose, f64)> {
         let mut adam = pose_adam(iters, depth, PoseSteps::Full, outline)?;
-        let mut objective = |x: &[f64], g: &mut [f64]| self.loss(x, g);
+        let tape = Tape::<f64>::new();
+        let mut objective = |x: &[f64], g: &mut [f64]| self.loss(&tape, x, g);
         let state = adam
             .minimize(&mut objective, pack_pose(start).to_vec())
             .map_err(Error::solver("placement"))?;

@@ -123,15 +123,13 @@ impl<'a> LabelVariation<'a> {
         let (bw, bh) = (w / block, self.photo.mask.height / block);
         let mut chroma = vec![None; bw * bh];
         for (&(bx, by), photo) in self.blocks.iter().zip(&self.photo_means) {
-            let mut albedo = [0.0f32; 3];
-            let mut whole = true;
-            for i in block_pixels(block, bx, by, w) {
-                match self.albedo(i, &to_mesh) {
-                    Some(a) => (0..3).for_each(|c| albedo[c] += a[c] / (block * block) as f32),
-                    None => whole = false,
-                }
-            }
-            if whole {
+            // A block read whole: none of its rays misses the probe.
+            let albedo = block_pixels(block, bx, by, w).try_fold([0.0f32; 3], |mut sum, i| {
+                let a = self.albedo(i, &to_mesh)?;
+                (0..3).for_each(|c| sum[c] += a[c] / (block * block) as f32);
+                Some(sum)
+            });
+            if let Some(albedo) = albedo {
                 let log = [0, 1, 2].map(|c| (photo[c] + self.dark).ln() - (albedo[c] + DARK_ALBEDO).ln());
                 let mean = (log[0] + log[1] + log[2]) / 3.0;
                 chroma[by * bw + bx] = Some(Vec3::from(log.map(|l| l - mean)));

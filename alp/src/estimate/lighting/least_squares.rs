@@ -198,12 +198,9 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
     }
     // The data term's curvature per unknown, and the prior's per texel (at
     // small differences; alike in every channel).
-    let data_curvature: Vec<f64> = transport
-        .weighted_column_norms(weight)
-        .iter()
-        .map(|h| 2.0 * h / weight_sum)
-        .collect();
-    let light = clipped_lights(transport, data, settings.clipped_light_share);
+    let column_norms = transport.weighted_column_norms(weight);
+    let data_curvature: Vec<f64> = column_norms.iter().map(|h| 2.0 * h / weight_sum).collect();
+    let light = clipped_lights(transport, data, &column_norms, settings.clipped_light_share);
     pairs.retain(|p| !light[p.i] && !light[p.j]);
     let pair_curvature = settings.smoothness.channel_curvature();
     let mut prior_curvature = vec![0.0; w * h];
@@ -287,12 +284,13 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
 
 /// The texels of a light brighter than the sensor's range: those that a
 /// clipped pixel (`data.at_least`) reads most strongly and that the data
-/// see more than `share` through clipped pixels (their curvature). A
+/// see more than `share` through clipped pixels (their curvature, against
+/// `column_norms`, [`Transport::weighted_column_norms`] of `data.weight`). A
 /// clipped pixel only bounds the light from below, and the prior, relative
 /// to the start's level there (the searches leave clipped pixels out),
 /// would hold the light at the bound's least; free of it, the light rises
 /// as far as the unclipped pixels around its footprint allow.
-pub(super) fn clipped_lights(transport: &Transport, data: &DataTerm, share: f64) -> Vec<bool> {
+pub(super) fn clipped_lights(transport: &Transport, data: &DataTerm, column_norms: &[f64], share: f64) -> Vec<bool> {
     let texels = transport.width * transport.height;
     let mut aimed = vec![false; texels];
     (0..transport.pixels)
@@ -306,10 +304,9 @@ pub(super) fn clipped_lights(transport: &Transport, data: &DataTerm, share: f64)
         .map(|(w, &a)| if a { *w } else { [0.0; 3] })
         .collect();
     let clipped = transport.weighted_column_norms(&clipped_weight);
-    let all = transport.weighted_column_norms(&data.weight);
     let sum = |v: &[f64], t: usize| v[3 * t..3 * t + 3].iter().sum::<f64>();
     (0..texels)
-        .map(|t| aimed[t] && sum(&clipped, t) > share * sum(&all, t))
+        .map(|t| aimed[t] && sum(&clipped, t) > share * sum(column_norms, t))
         .collect()
 }
 
@@ -498,7 +495,7 @@ mod tests {
                 .expect("a solve")
                 .env[27]
         };
-        let lights = clipped_lights(&transport, &data, 0.5);
+        let lights = clipped_lights(&transport, &data, &transport.weighted_column_norms(&data.weight), 0.5);
         assert_eq!(lights.iter().filter(|&&l| l).count(), 1, "one light texel");
         assert!(lights[9], "the clipped pixel's texel");
         assert!((light(0.5) - 100.0).abs() < 1.0, "free: {}", light(0.5));
