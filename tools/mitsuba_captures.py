@@ -1,8 +1,8 @@
 """Mitsuba twin of a capture folder (`alp synth captures`): every view's photo path-traced by
 Mitsuba 3 (real self-occlusion and inter-reflections, the BRDF ours as in mitsuba_scenes.py),
 its mask the film's coverage (alpha > 0.5), so that a probe's acquisition is judged on images
-its own renderer did not make. The scan (`mesh.obj`), `lighting.exr` and `true_pose.json` are
-kept; each view's `camera.json` too. The probe's textures come from the probe the capture was
+its own renderer did not make. The scan (`mesh.obj`), `lighting.exr`, `true_pose.json` and
+`true_probe/` are kept; each view's `camera.json` too. The probe's textures come from the probe the capture was
 made of (`--probe`: a probe folder, or a procedural name made with `--alp`).
 
     python3 mitsuba_captures.py --capture /work/cap/can --probe can --alp ../target/release/alp \\
@@ -64,6 +64,9 @@ def main():
     os.makedirs(os.path.join(tmp, "views"))
     for f in KEPT:
         shutil.copy(os.path.join(args.capture, f), tmp)
+    # The truth an acquisition is judged against (`alp acquire` reads it).
+    if os.path.isdir(os.path.join(args.capture, "true_probe")):
+        shutil.copytree(os.path.join(args.capture, "true_probe"), os.path.join(tmp, "true_probe"))
     for k, name in enumerate(views):
         t0 = time.time()
         src, dst = os.path.join(views_dir, name), os.path.join(tmp, "views", name)

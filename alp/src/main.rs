@@ -25,6 +25,8 @@ struct Cli {
 enum Command {
     /// Estimate the lighting and the probe's pose from a photo (the main job).
     Estimate(alp::estimate::cli::EstimateArgs),
+    /// Make a probe asset from a capture: many views of the object under known lighting.
+    Acquire(alp::acquire::cli::AcquireArgs),
     /// Render a probe at a pose under an environment map (linear EXR plus a PNG preview).
     Render(RenderArgs),
     /// Render the evaluation's mirror, shiny and diffuse spheres under an env map (768x256 EXR, left to right).
@@ -205,6 +207,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Estimate(args) => alp::estimate::cli::run(&args),
+        Command::Acquire(args) => alp::acquire::cli::run(&args),
         Command::Render(args) => render(&args),
         Command::Relight(args) => relight(&args),
         Command::Eval(args) => eval(&args),

@@ -285,6 +285,8 @@ pub struct SynthCapture {
     pub capture: Capture,
     /// The scan's true mesh-to-world pose (the truth an acquisition is judged against).
     pub to_world: Pose,
+    /// The probe as the scan: its mesh in the scan's frame, its true textures.
+    pub probe: ProbeAsset,
 }
 
 /// Renders `probe` under `env` standing upright at the origin of the world, as a turntable in a
@@ -351,21 +353,28 @@ pub fn synthesize_capture(probe: &ProbeAsset, env: &EnvMap, settings: &CaptureSe
         let photo = Photo::new(image, mask, camera).map_err(|e| Error::invalid(name.clone(), e.rule()))?;
         views.push(View { name, photo });
     }
+    let scanned = ProbeAsset {
+        mesh: probe.mesh.posed(&scan),
+        ..probe.clone()
+    };
     Ok(SynthCapture {
         capture: Capture {
-            mesh: probe.mesh.posed(&scan),
+            mesh: scanned.mesh.clone(),
             lighting: env.clone(),
             views,
         },
         to_world,
+        probe: scanned,
     })
 }
 
-/// Writes a synthetic capture folder atomically: the capture's files, and `true_pose.json`, the
-/// scan's true mesh-to-world pose.
+/// Writes a synthetic capture folder atomically: the capture's files, and its truth
+/// (`acquire::truth`): `true_pose.json`, the scan's true mesh-to-world pose, and `true_probe/`,
+/// the probe with the scan's mesh and the true textures.
 pub fn write_capture(out: &Path, synth: &SynthCapture) -> Result<()> {
     crate::output::write_folder_atomically(out, |dir| {
         synth.capture.write(dir)?;
+        synth.probe.write(dir.join("true_probe"))?;
         Ok(synth.to_world.write(dir.join("true_pose.json"))?)
     })
 }

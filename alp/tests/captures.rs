@@ -182,13 +182,21 @@ fn the_scan_is_placed_from_the_silhouettes_alone() {
     let capture = Capture::read(&out).expect("a capture");
     let truth = Pose::read(out.join("true_pose.json")).expect("the true pose");
     let t0 = std::time::Instant::now();
-    let placed = place(&capture, &PlacementSettings::default()).expect("a placement");
+    let placements = place(&capture, &PlacementSettings::default()).expect("a placement");
+    let placed = placements[0];
     let found = placed.to_world;
     // The scan's axis in its own frame, taken to the world by each pose.
     let to_y = alp::estimate::symmetry::axis_to_y(&capture.mesh, &alp::estimate::Settings::default().symmetry);
     let scan_axis = to_y.inverse() * glam::Vec3::Y;
     let axis = |p: &Pose| p.rotation * scan_axis;
+    // The best outline's axis, up to its sign (a can's ends cast near the
+    // same outline); the right end among the candidates.
     let axis_deg = axis(&found).dot(axis(&truth)).abs().min(1.0).acos().to_degrees();
+    let signed_deg = |p: &Pose| axis(p).dot(axis(&truth)).clamp(-1.0, 1.0).acos().to_degrees();
+    assert!(
+        placements.iter().any(|p| signed_deg(&p.to_world) < 2.0),
+        "no candidate has the scan's ends the right way round"
+    );
     let (lo, hi) = capture.mesh.bounds();
     let middle = 0.5 * (lo + hi);
     let size = truth.scale * (hi - lo).length();
@@ -203,5 +211,110 @@ fn the_scan_is_placed_from_the_silhouettes_alone() {
     assert!(axis_deg < 2.0, "axis {axis_deg} deg off");
     assert!(centre_off < 0.02, "centre {centre_off} of the size off");
     assert!((scale_ratio - 1.0).abs() < 0.01, "scale x{scale_ratio}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `report.json` of an acquisition, parsed.
+fn report(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    serde_json::from_str(&text).expect("JSON")
+}
+
+#[test]
+fn a_small_capture_becomes_a_probe_whose_textures_are_near_the_truth() {
+    // The can, 8 views of 96x72: the probe folder is complete, `alp estimate`
+    // reads it, and its textures are near the can's where the views see it.
+    let (dir, env) = workspace("acquire", 16);
+    let (capture, out) = (dir.join("capture"), dir.join("probe"));
+    let (env_s, capture_s, out_s) = (
+        env.to_str().expect("utf-8"),
+        capture.to_str().expect("utf-8"),
+        out.to_str().expect("utf-8"),
+    );
+    let run = alp(&[
+        "synth", "captures", "--probe", "can", "--env", env_s, "--views", "8", "--out", capture_s, "--width", "96",
+        "--height", "72", "--spp", "16", "--seed", "5",
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let run = alp(&[
+        "acquire",
+        "--captures",
+        capture_s,
+        "--out",
+        out_s,
+        "--texture-size",
+        "32x16",
+        "--quality",
+        "fast",
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    for file in [
+        "probe.json",
+        "mesh.obj",
+        "albedo.exr",
+        "roughness.exr",
+        "visibility.exr",
+        "coverage.exr",
+        "report.json",
+        "preview.png",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let probe = render::probe::ProbeAsset::read(&out).expect("a probe folder");
+    assert_eq!((probe.albedo.image.width, probe.albedo.image.height), (32, 16));
+    let report = report(&out);
+    let truth = &report["truth"];
+    eprintln!("{truth}");
+    let number = |v: &serde_json::Value| v.as_f64().expect("a number");
+    assert!(number(&truth["axis_deg"]) < 3.0, "axis {}", truth["axis_deg"]);
+    assert!(
+        number(&truth["albedo_rmse"]) < 0.15,
+        "albedo RMSE {}",
+        truth["albedo_rmse"]
+    );
+    assert!(
+        number(&truth["roughness_rmse"]) < 0.15,
+        "roughness RMSE {}",
+        truth["roughness_rmse"]
+    );
+    assert_eq!(report["views"].as_array().expect("views").len(), 8);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_acquire_inputs_are_clear_errors_and_keep_the_output() {
+    let (dir, _env) = workspace("acquire-bad", 8);
+    let out = dir.join("probe");
+    std::fs::create_dir_all(&out).expect("out");
+    std::fs::write(out.join("kept.txt"), "mine").expect("a file of the user's");
+    let out_s = out.to_str().expect("utf-8");
+    let missing = dir.join("no-such-capture");
+    let missing_s = missing.to_str().expect("utf-8");
+    for (args, expected) in [
+        (vec!["--captures", missing_s, "--out", out_s], "no-such-capture"),
+        (
+            vec!["--captures", missing_s, "--out", out_s, "--texture-size", "512by256"],
+            "--texture-size",
+        ),
+        (
+            vec!["--captures", missing_s, "--out", out_s, "--texture-size", "2x256"],
+            "--texture-size",
+        ),
+        (
+            vec!["--captures", missing_s, "--out", out_s, "--quality", "great"],
+            "--quality",
+        ),
+        (
+            vec!["--captures", missing_s, "--out", out_s, "--threads", "0"],
+            "--threads",
+        ),
+    ] {
+        let run = alp(&[&["acquire"], args.as_slice()].concat());
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{args:?} succeeded");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+    assert_eq!(std::fs::read_to_string(out.join("kept.txt")).expect("kept"), "mine");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use autodiff::Tape;
 use optim::Solver;
 use render::camera::Camera;
+use render::image_io::Mask;
 use render::mesh::{EdgeAdjacency, Mesh};
 use render::pose::Pose;
 use render::posed::{MeshVars, PoseVars, PosedMesh, pack_pose, unpack_pose};
@@ -39,6 +40,15 @@ pub struct PlacementSettings {
     pub kept: usize,
     /// Adam iterations of a kept start's fit.
     pub final_iters: usize,
+    /// The starts and the kept fits read the views shrunk by a whole
+    /// factor to about this height: fewer pixels, about as sure an outline.
+    pub coarse_height_px: u32,
+    /// Adam iterations of the kept fits' polish at the views' own size.
+    pub polish_iters: usize,
+    /// The end-for-end twin of the best fit is a candidate when its
+    /// silhouette loss is at most this many times the best's: higher
+    /// lets the texture solve judge scans whose ends differ more in outline.
+    pub twin_loss_ratio: f64,
 }
 
 impl Default for PlacementSettings {
@@ -48,6 +58,9 @@ impl Default for PlacementSettings {
             start_iters: 40,
             kept: 3,
             final_iters: 150,
+            coarse_height_px: 120,
+            polish_iters: 40,
+            twin_loss_ratio: 2.0,
         }
     }
 }
@@ -64,7 +77,7 @@ pub struct Placement {
 struct Silhouettes<'a> {
     mesh: &'a Mesh,
     edges: EdgeAdjacency,
-    views: Vec<(&'a Camera, ReferenceMask)>,
+    views: Vec<(Camera, ReferenceMask)>,
 }
 
 impl Silhouettes<'_> {
@@ -116,18 +129,28 @@ impl Silhouettes<'_> {
 }
 
 /// Places the capture's scan in the cameras' frame (see the module's
-/// description).
-pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Placement> {
-    let views: Vec<(&Camera, ReferenceMask)> = capture
-        .views
-        .iter()
-        .map(|v| Ok((&v.photo.camera, ReferenceMask::new(&v.photo.mask)?)))
-        .collect::<Result<_>>()?;
-    let silhouettes = Silhouettes {
-        mesh: &capture.mesh,
-        edges: EdgeAdjacency::new(&capture.mesh),
-        views,
+/// description): the best fit, and its end-for-end twin when its outline
+/// fits nearly as well (best first).
+pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Placement>> {
+    let silhouettes = |reduced_px: Option<u32>| -> Result<Silhouettes> {
+        let views = capture
+            .views
+            .iter()
+            .map(|v| {
+                let (camera, mask) = match reduced_px {
+                    Some(px) => reduced(&v.photo.camera, &v.photo.mask, px)?,
+                    None => (v.photo.camera.clone(), v.photo.mask.clone()),
+                };
+                Ok((camera, ReferenceMask::new(&mask)?))
+            })
+            .collect::<Result<_>>()?;
+        Ok(Silhouettes {
+            mesh: &capture.mesh,
+            edges: EdgeAdjacency::new(&capture.mesh),
+            views,
+        })
     };
+    let (coarse, full) = (silhouettes(Some(settings.coarse_height_px))?, silhouettes(None)?);
     let centre = rays_meet(capture)?;
     let (lo, hi) = capture.mesh.bounds();
     let (scan_centre, scan_radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
@@ -150,23 +173,72 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Placemen
         .collect();
     let mut fitted: Vec<(Pose, f64)> = starts
         .par_iter()
-        .map(|start| silhouettes.fit(start, settings.start_iters, depth, &outline))
+        .map(|start| coarse.fit(start, settings.start_iters, depth, &outline))
         .collect::<Result<_>>()?;
     fitted.retain(|(_, loss)| loss.is_finite());
     fitted.sort_by(|a, b| a.1.total_cmp(&b.1));
     fitted.truncate(settings.kept.max(1));
     let best = fitted
         .par_iter()
-        .map(|(pose, _)| silhouettes.fit(pose, settings.final_iters, depth, &outline))
+        .map(|(pose, _)| {
+            let (pose, _) = coarse.fit(pose, settings.final_iters, depth, &outline)?;
+            full.fit(&pose, settings.polish_iters, depth, &outline)
+        })
         .collect::<Result<Vec<_>>>()?
         .into_iter()
         .filter(|(_, loss)| loss.is_finite())
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .ok_or_else(|| Error::invalid("capture", "no start kept the scan in every view"))?;
-    Ok(Placement {
+    // The best fit turned end for end about its centre, fitted in turn: a
+    // scan whose two ends cast near the same outline (a can, a cap) is told
+    // apart by its texture solve.
+    let axis = to_y.inverse() * Vec3::Y;
+    let across = axis.any_orthonormal_vector();
+    let flipped = Pose::new(
+        best.0.rotation * Quat::from_axis_angle(across, std::f32::consts::PI),
+        best.0.scale,
+        best.0.transform_point(scan_centre)
+            - best.0.scale * (best.0.rotation * Quat::from_axis_angle(across, std::f32::consts::PI) * scan_centre),
+    );
+    let (twin, _) = coarse.fit(&flipped, settings.final_iters, depth, &outline)?;
+    let twin = full.fit(&twin, settings.polish_iters, depth, &outline)?;
+    let mut placements = vec![Placement {
         to_world: best.0,
         loss: best.1,
-    })
+    }];
+    if twin.1.is_finite() && twin.1 <= settings.twin_loss_ratio * best.1 {
+        placements.push(Placement {
+            to_world: twin.0,
+            loss: twin.1,
+        });
+    }
+    placements.sort_by(|a, b| a.loss.total_cmp(&b.loss));
+    Ok(placements)
+}
+
+/// `camera` and `mask` shrunk by the largest whole factor that divides
+/// both sides and leaves at least `height_px` rows (the same projection: a
+/// factor that divides both keeps the aspect); a pixel of the shrunk mask
+/// is inside when at least half of its block is.
+fn reduced(camera: &Camera, mask: &Mask, height_px: u32) -> Result<(Camera, Mask)> {
+    let (w, h) = (camera.width, camera.height);
+    let factor = (1..=(h / height_px.max(1)).max(1))
+        .rev()
+        .find(|f| w % f == 0 && h % f == 0)
+        .unwrap_or(1);
+    let (rw, rh) = (w / factor, h / factor);
+    let shrunk = Camera::new(rw, rh, camera.fov_y_deg, camera.origin, camera.target, camera.up)?;
+    let f = factor as usize;
+    let inside = (0..(rw * rh) as usize)
+        .map(|p| {
+            let (x, y) = (p % rw as usize, p / rw as usize);
+            let count = (0..f * f)
+                .filter(|k| mask.inside[(y * f + k / f) * mask.width + x * f + k % f])
+                .count();
+            2 * count >= f * f
+        })
+        .collect();
+    Ok((shrunk, Mask::new(rw as usize, rh as usize, inside)))
 }
 
 /// The point nearest (least squares) to the rays through every view's mask

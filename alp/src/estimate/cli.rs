@@ -63,7 +63,7 @@ pub struct EstimateArgs {
     pub size_search: bool,
 }
 
-fn parse_quality(q: &str) -> Result<Quality> {
+pub(crate) fn parse_quality(q: &str) -> Result<Quality> {
     match q {
         "fast" => Ok(Quality::Fast),
         "default" => Ok(Quality::Default),
@@ -102,9 +102,6 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     if args.size_search {
         settings.pose_search.size_step_px = 0.5;
     }
-    if args.threads == Some(0) {
-        return Err(Error::invalid("--threads", "needs at least one thread"));
-    }
     settings.known_pose = args.pose.as_ref().map(Pose::read).transpose()?;
     if let Some(path) = &args.objective {
         settings.objective = Arc::new(Objective::from_file(path)?);
@@ -114,21 +111,9 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     let mask = Mask::read_png(&args.mask)?;
     let photo = Photo::new(image, mask, camera).map_err(|e| e.in_file(&args.image))?;
     let probe = crate::probes::load(&args.probe)?;
-    let threads = args.threads.unwrap_or_else(rayon::current_num_threads);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::invalid("--threads", e.to_string()))?;
+    let pool = thread_pool(args.threads)?;
     let verbose = std::io::stderr().is_terminal();
-    let bar = if verbose {
-        indicatif::ProgressBar::new(settings.phase_count() as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("alp estimate {bar:30} {pos}/{len} phases, {elapsed} {msg}")
-            .expect("a valid template"),
-    );
+    let bar = progress_bar(verbose, "alp estimate {bar:30} {pos}/{len} phases, {elapsed} {msg}");
     let result = pool.install(|| {
         estimate_with_progress(&photo, &probe, &settings, &mut |phase, done, expected| {
             bar.set_length(expected as u64);
@@ -163,6 +148,28 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         std::fs::write(dir.join("report.json"), json + "\n")
             .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
     })
+}
+
+/// A pool of `threads` workers (all cores when `None`).
+pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    if threads == Some(0) {
+        return Err(Error::invalid("--threads", "needs at least one thread"));
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or_else(rayon::current_num_threads))
+        .build()
+        .map_err(|e| Error::invalid("--threads", e.to_string()))
+}
+
+/// A progress bar on a terminal (`verbose`), hidden otherwise.
+pub(crate) fn progress_bar(verbose: bool, template: &str) -> indicatif::ProgressBar {
+    let bar = if verbose {
+        indicatif::ProgressBar::new(1)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("a valid template"));
+    bar
 }
 
 /// Photo, re-render and env map side by side (the map scaled to the photo's height).
