@@ -31,6 +31,22 @@ pub struct AcquireArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Weight of the albedo's total-variation prior (default: the preset's):
+    /// higher fills unseen or noisy texels more smoothly and blurs printed detail.
+    #[arg(long)]
+    pub albedo_smoothness: Option<f64>,
+    /// Weight of the roughness's total-variation prior (default: the preset's).
+    #[arg(long)]
+    pub roughness_smoothness: Option<f64>,
+}
+
+/// A prior's weight from its flag: finite and not negative.
+fn weight(flag: &str, value: Option<f64>, preset: f64) -> Result<f64> {
+    match value {
+        None => Ok(preset),
+        Some(w) if w.is_finite() && w >= 0.0 => Ok(w),
+        Some(w) => Err(Error::invalid(flag, format!("{w}: a weight is finite and at least 0"))),
+    }
 }
 
 /// The texture size of `--texture-size`.
@@ -57,7 +73,18 @@ const MAX_SIDE: usize = 4096;
 /// Reads and checks the capture, acquires the probe and writes the folder.
 pub fn run(args: &AcquireArgs) -> Result<()> {
     let size = parse_texture_size(&args.texture_size)?;
-    let settings = AcquireSettings::preset(parse_quality(&args.quality)?);
+    let mut settings = AcquireSettings::preset(parse_quality(&args.quality)?);
+    let material = &mut settings.material;
+    material.albedo_smoothness = weight(
+        "--albedo-smoothness",
+        args.albedo_smoothness,
+        material.albedo_smoothness,
+    )?;
+    material.roughness_smoothness = weight(
+        "--roughness-smoothness",
+        args.roughness_smoothness,
+        material.roughness_smoothness,
+    )?;
     let pool = thread_pool(args.threads)?;
     let capture = Capture::read(&args.captures)?;
     let truth = Truth::read(&args.captures)?;

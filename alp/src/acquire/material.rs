@@ -31,7 +31,7 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 use render::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use render::probe::{ProbeAsset, Texture};
-use render::sampling::EnvSampler;
+use render::sampling::{EnvSampler, Rng};
 use serde::Serialize;
 
 use super::capture::Capture;
@@ -51,6 +51,10 @@ pub struct MaterialSettings {
     pub views_per_step: usize,
     /// Samples per pixel of each render: fewer are faster and noisier.
     pub spp: u32,
+    /// Most pixels of a view one step renders (a random share of a view
+    /// with more): bounds a step's time on a probe that fills the views,
+    /// at more noise per step there.
+    pub pixels_per_view: usize,
     /// Adam's step on texel values (albedo, roughness and visibility in
     /// [0, 1]) at the start of each level: larger moves faster, but Adam's
     /// steps on a texel few samples see are near random (each is about
@@ -85,6 +89,7 @@ impl Default for MaterialSettings {
             steps: 150,
             views_per_step: 2,
             spp: 4,
+            pixels_per_view: 8000,
             step: 0.05,
             step_floor: 0.01,
             albedo_smoothness: 0.1,
@@ -329,7 +334,10 @@ impl Problem<'_> {
     }
 
     /// Two independent sets of hits (seeds from `seed`) of view `v` over
-    /// the same fitted pixels.
+    /// the same fitted pixels: all of them, or when there are more than
+    /// `MaterialSettings::pixels_per_view`, a random share of that many
+    /// (drawn afresh with each seed, so the mean over them stays the
+    /// view's mean on average).
     fn hit_pair(&self, v: usize, seed: u64) -> [PrimaryHits; 2] {
         let [mut a, mut b] = [seed, seed ^ SECOND_RENDER].map(|s| self.hits(v, s));
         let size = a.width * a.height;
@@ -339,8 +347,12 @@ impl Problem<'_> {
                 both[p as usize] |= bit;
             }
         }
-        a.retain_pixels(|p| both[p as usize] == 3);
-        b.retain_pixels(|p| both[p as usize] == 3);
+        let share = self.settings.pixels_per_view as f32 / self.views[v].target.len().max(1) as f32;
+        let kept = |p: u32| {
+            both[p as usize] == 3 && (share >= 1.0 || Rng::new(seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
+        };
+        a.retain_pixels(kept);
+        b.retain_pixels(kept);
         [a, b]
     }
 
@@ -656,6 +668,9 @@ fn luminance(rgb: &[f32; 3]) -> f32 {
     0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
 }
 
+/// The random stream (plus the pixel's index) of a step's share of a view's pixels.
+const PIXEL_SHARE_STREAM: u64 = 0x5A4E_0000_0000;
+
 /// Flips the seed of a data term's second render.
 const SECOND_RENDER: u64 = 1 << 63;
 
@@ -701,13 +716,10 @@ fn fill(image: &RgbImage, weight: &[f32]) -> RgbImage {
     let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
     let mut sums = vec![[0.0f32; 3]; cw * ch];
     let mut weights = vec![0.0f32; cw * ch];
-    for p in 0..w * h {
+    for (p, (&c, texel)) in weight.iter().zip(&image.pixels).enumerate() {
         let q = (p / w / 2) * cw + (p % w) / 2;
-        let c = weight[p];
         weights[q] += c;
-        for k in 0..3 {
-            sums[q][k] += c * image.pixels[p][k];
-        }
+        sums[q].iter_mut().zip(texel).for_each(|(s, &v)| *s += c * v);
     }
     let coarse_image = RgbImage::new(
         cw,

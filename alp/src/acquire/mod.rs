@@ -53,6 +53,7 @@ impl AcquireSettings {
                     steps: 60,
                     views_per_step: 2,
                     spp: 2,
+                    pixels_per_view: 4000,
                     ..default.material
                 },
                 report_spp: 8,
@@ -63,6 +64,7 @@ impl AcquireSettings {
                     steps: 300,
                     views_per_step: 3,
                     spp: 8,
+                    pixels_per_view: 16000,
                     ..default.material
                 },
                 report_spp: 32,

@@ -139,7 +139,7 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
             .map(|v| {
                 let (camera, mask) = match reduced_px {
                     Some(px) => reduced(&v.photo.camera, &v.photo.mask, px)?,
-                    None => (v.photo.camera.clone(), v.photo.mask.clone()),
+                    None => (v.photo.camera, v.photo.mask.clone()),
                 };
                 Ok((camera, ReferenceMask::new(&mask)?))
             })
