@@ -71,6 +71,11 @@ pub struct MaterialSettings {
     /// Weight of the pull of the visibility towards 1: lower lets the
     /// visibility darken what the albedo could explain.
     pub visibility_prior: f64,
+    /// Levels (from the coarsest) at which the roughness is solved for;
+    /// finer ones keep it, upsampled: a texel's roughness shows only in how
+    /// a reflection blurs, which a few pixels' noise hides (solved at
+    /// every level, a label of one roughness came out salt and pepper).
+    pub roughness_levels: usize,
     /// The least roughness solved for: GGX at 0 is a mirror, whose Dirac
     /// lobe has no gradient in the roughness.
     pub min_roughness: f64,
@@ -95,6 +100,7 @@ impl Default for MaterialSettings {
             albedo_smoothness: 0.1,
             roughness_smoothness: 0.25,
             visibility_prior: 1.0,
+            roughness_levels: 2,
             min_roughness: 0.02,
             relative_floor: 0.5,
             well_seen: 2.0,
@@ -553,15 +559,18 @@ impl<'a> Problem<'a> {
         let n = layout.texels();
         let steps = settings.steps.max(1);
         let anneal = Cosine::new(steps, settings.step_floor).map_err(Error::solver("texture solve"))?;
-        let group = |range: std::ops::Range<usize>, lower: f64| {
-            ParamGroup::new(range, settings.step)
-                .bounds(lower, 1.0)
-                .schedule(anneal)
+        let group = |range: std::ops::Range<usize>, lower: f64, step: f64| {
+            ParamGroup::new(range, step).bounds(lower, 1.0).schedule(anneal)
+        };
+        let roughness_step = if level < settings.roughness_levels {
+            settings.step
+        } else {
+            0.0
         };
         let mut adam = Adam::builder(layout.len())
-            .group(group(0..3 * n, 0.0))
-            .group(group(layout.roughness(), settings.min_roughness))
-            .group(group(layout.visibility(), 0.0))
+            .group(group(0..3 * n, 0.0, settings.step))
+            .group(group(layout.roughness(), settings.min_roughness, roughness_step))
+            .group(group(layout.visibility(), 0.0, settings.step))
             .max_iters(steps)
             .build()
             .map_err(Error::solver("texture solve"))?;
