@@ -220,11 +220,11 @@ fn report(out: &Path) -> serde_json::Value {
     serde_json::from_str(&text).expect("JSON")
 }
 
-#[test]
-fn a_small_capture_becomes_a_probe_whose_textures_are_near_the_truth() {
-    // The can, 8 views of 96x72: the probe folder is complete, `alp estimate`
-    // reads it, and its textures are near the can's where the views see it.
-    let (dir, env) = workspace("acquire", 16);
+/// The can, 8 views of 96x72 at relative sensor noise `noise`, acquired
+/// at 32x16 and the fast quality into `<workspace>/probe`: the workspace
+/// and the acquisition's `truth` in `report.json`.
+fn acquire_small_can(name: &str, noise: &str) -> (std::path::PathBuf, serde_json::Value) {
+    let (dir, env) = workspace(name, 16);
     let (capture, out) = (dir.join("capture"), dir.join("probe"));
     let (env_s, capture_s, out_s) = (
         env.to_str().expect("utf-8"),
@@ -233,7 +233,7 @@ fn a_small_capture_becomes_a_probe_whose_textures_are_near_the_truth() {
     );
     let run = alp(&[
         "synth", "captures", "--probe", "can", "--env", env_s, "--views", "8", "--out", capture_s, "--width", "96",
-        "--height", "72", "--spp", "16", "--seed", "5",
+        "--height", "72", "--spp", "16", "--seed", "5", "--noise", noise,
     ]);
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     let run = alp(&[
@@ -248,6 +248,34 @@ fn a_small_capture_becomes_a_probe_whose_textures_are_near_the_truth() {
         "fast",
     ]);
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let truth = report(&out)["truth"].clone();
+    eprintln!("noise {noise}: {truth}");
+    (dir, truth)
+}
+
+/// The acquisition's errors within bounds: the axis the right way up,
+/// albedo and roughness RMSE.
+fn assert_near_the_truth(truth: &serde_json::Value, albedo: f64, roughness: f64) {
+    let number = |v: &serde_json::Value| v.as_f64().expect("a number");
+    assert!(number(&truth["axis_deg"]) < 3.0, "axis {}", truth["axis_deg"]);
+    assert!(
+        number(&truth["albedo_rmse"]) < albedo,
+        "albedo RMSE {}",
+        truth["albedo_rmse"]
+    );
+    assert!(
+        number(&truth["roughness_rmse"]) < roughness,
+        "roughness RMSE {}",
+        truth["roughness_rmse"]
+    );
+}
+
+#[test]
+fn a_small_capture_becomes_a_probe_whose_textures_are_near_the_truth() {
+    // The probe folder is complete and reads back, and its textures are
+    // near the can's where the views see it.
+    let (dir, truth) = acquire_small_can("acquire", "0");
+    let out = dir.join("probe");
     for file in [
         "probe.json",
         "mesh.obj",
@@ -262,25 +290,19 @@ fn a_small_capture_becomes_a_probe_whose_textures_are_near_the_truth() {
     }
     let probe = render::probe::ProbeAsset::read(&out).expect("a probe folder");
     assert_eq!((probe.albedo.image.width, probe.albedo.image.height), (32, 16));
-    let report = report(&out);
-    let truth = &report["truth"];
-    eprintln!("{truth}");
-    let number = |v: &serde_json::Value| v.as_f64().expect("a number");
-    assert!(number(&truth["axis_deg"]) < 3.0, "axis {}", truth["axis_deg"]);
-    // Measured 0.23 and 0.07: the label is found, the lid (which reflects
-    // a dark sky in every view) is not; a placement end for end measured
-    // 0.45 on the can.
-    assert!(
-        number(&truth["albedo_rmse"]) < 0.3,
-        "albedo RMSE {}",
-        truth["albedo_rmse"]
-    );
-    assert!(
-        number(&truth["roughness_rmse"]) < 0.12,
-        "roughness RMSE {}",
-        truth["roughness_rmse"]
-    );
-    assert_eq!(report["views"].as_array().expect("views").len(), 8);
+    assert_eq!(report(&out)["views"].as_array().expect("views").len(), 8);
+    // Measured 0.22-0.23 and 0.06-0.07: the label is found, the lid (which
+    // reflects a dark sky in every view) is not; a placement end for end
+    // measured 0.45 on the can.
+    assert_near_the_truth(&truth, 0.3, 0.12);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sensor_noise_leaves_the_acquisition_near_the_truth() {
+    // 5 % multiplicative noise on every pixel of every view.
+    let (dir, truth) = acquire_small_can("acquire-noise", "0.05");
+    assert_near_the_truth(&truth, 0.3, 0.12);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
