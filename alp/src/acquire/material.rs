@@ -399,38 +399,25 @@ impl Problem<'_> {
     }
 
     /// The priors at textures `x`: the albedo's and the roughness's total
-    /// variation and the visibility's pull towards 1 (unweighted), their
-    /// weighted sum's gradient added into `g`.
-    fn priors(&self, layout: Layout, x: &[f64], g: &mut [f64]) -> [f64; 3] {
+    /// variation over the texel pairs `pairs` and the visibility's pull
+    /// towards 1 (unweighted), their weighted sum's gradient added into `g`.
+    fn priors(&self, layout: Layout, pairs: &TexelPairs, x: &[f64], g: &mut [f64]) -> [f64; 3] {
         let tape = Tape::<f64>::new();
         let params = tape.leaf(x);
-        let n = layout.texels();
-        let w = layout.width;
-        // Neighbouring texel pairs, right and below.
-        let pairs: Vec<(usize, usize)> = (0..n)
-            .flat_map(|t| {
-                let right = (t % w + 1 < w).then_some((t, t + 1));
-                let below = (t + w < n).then_some((t, t + w));
-                right.into_iter().chain(below)
-            })
-            .collect();
-        // Mean absolute difference over the pairs of the values at
-        // `offset + stride * texel + channel`.
-        let variation = |offset: usize, stride: usize| {
-            if pairs.is_empty() {
+        let variation = |[a, b]: &[Vec<f64>; 2]| {
+            if a.is_empty() {
                 return tape.constant(&[0.0]);
             }
-            let at = |pick: fn(&(usize, usize)) -> usize| {
-                let index: Vec<f64> = (0..stride)
-                    .flat_map(|c| pairs.iter().map(move |pair| (offset + stride * pick(pair) + c) as f64))
-                    .collect();
-                params.gather(tape.constant(&index))
-            };
-            (at(|p| p.0) - at(|p| p.1)).abs().mean()
+            (params.gather(tape.constant(a)) - params.gather(tape.constant(b)))
+                .abs()
+                .mean()
         };
-        let albedo = variation(0, 3);
-        let roughness = variation(layout.roughness().start, 1);
-        let visibility = params.slice(layout.visibility().start, n).rsub(1.0).mean();
+        let albedo = variation(&pairs.albedo);
+        let roughness = variation(&pairs.roughness);
+        let visibility = params
+            .slice(layout.visibility().start, layout.texels())
+            .rsub(1.0)
+            .mean();
         let s = self.settings;
         let total = albedo * s.albedo_smoothness + roughness * s.roughness_smoothness + visibility * s.visibility_prior;
         tape.backward(total);
@@ -438,6 +425,39 @@ impl Problem<'_> {
             *gi += d;
         }
         [tape.item(albedo), tape.item(roughness), tape.item(visibility)]
+    }
+}
+
+/// The neighbouring texels (right and below) of a level's textures, as
+/// indices into its parameters: each prior's two sides.
+struct TexelPairs {
+    albedo: [Vec<f64>; 2],
+    roughness: [Vec<f64>; 2],
+}
+
+impl TexelPairs {
+    fn new(layout: Layout) -> Self {
+        let (n, w) = (layout.texels(), layout.width);
+        let pairs: Vec<(usize, usize)> = (0..n)
+            .flat_map(|t| {
+                let right = (t % w + 1 < w).then_some((t, t + 1));
+                let below = (t + w < n).then_some((t, t + w));
+                right.into_iter().chain(below)
+            })
+            .collect();
+        // The values at `offset + stride * texel + channel` of each side.
+        let sides = |offset: usize, stride: usize| {
+            let side = |pick: fn(&(usize, usize)) -> usize| {
+                (0..stride)
+                    .flat_map(|c| pairs.iter().map(move |pair| (offset + stride * pick(pair) + c) as f64))
+                    .collect()
+            };
+            [side(|p| p.0), side(|p| p.1)]
+        };
+        TexelPairs {
+            albedo: sides(0, 3),
+            roughness: sides(layout.roughness().start, 1),
+        }
     }
 }
 
@@ -578,6 +598,7 @@ impl<'a> Problem<'a> {
         let per_step = settings.views_per_step.clamp(1, views);
         let (mut evaluation, mut data_history, mut priors) = (0usize, Vec::with_capacity(steps + 1), [0.0; 3]);
         let (mut mean_x, mut averaged) = (vec![0.0; layout.len()], 0usize);
+        let pairs = TexelPairs::new(layout);
         let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
             let x32: Vec<f32> = x.iter().map(|&v| v as f32).collect();
             let mut view_grad = vec![0.0; g.len()];
@@ -591,7 +612,7 @@ impl<'a> Problem<'a> {
                 *gi = d / per_step as f64;
             }
             let data = data / per_step as f64;
-            priors = self.priors(layout, x, g);
+            priors = self.priors(layout, &pairs, x, g);
             data_history.push(data);
             if 2 * evaluation >= steps {
                 mean_x.iter_mut().zip(x).for_each(|(m, &v)| *m += v);
