@@ -317,8 +317,9 @@ impl Problem<'_> {
             .map(|t| (luminance(t).max(0.0) + floor).max(1e-12).powi(-2))
             .collect();
         let weight = tape.constant(&weight);
-        let rgb_a = self.render(tape, layout, params, v, &a);
-        let rgb_b = self.render(tape, layout, params, v, &b);
+        let scene = self.scene(tape, layout, params);
+        let rgb_a = self.render(tape, &scene, v, &a);
+        let rgb_b = self.render(tape, &scene, v, &b);
         let mut surrogate = tape.constant(&[0.0]);
         let mut value = 0.0;
         let pixels = 3.0 * target.len() as f32;
@@ -362,15 +363,10 @@ impl Problem<'_> {
         [a, b]
     }
 
-    /// View `v`'s re-render in the pixels of `hits` with the textures `params`.
-    fn render<'t>(
-        &self,
-        tape: &'t Tape<f32>,
-        layout: Layout,
-        params: Var<'t, f32>,
-        v: usize,
-        hits: &PrimaryHits,
-    ) -> [Var<'t, f32>; 3] {
+    /// The probe with the textures `params`, posed, and the lighting, on
+    /// `tape`: what every render of a step reads (recorded once a step, not
+    /// once a render: the lighting alone is its whole map).
+    fn scene<'t>(&self, tape: &'t Tape<f32>, layout: Layout, params: Var<'t, f32>) -> Scene<'t> {
         let n = layout.texels();
         let image =
             |texels: Var<'t, f32>| TextureVars::Image(ImageVars::from_texels(texels, layout.width, layout.height));
@@ -384,18 +380,27 @@ impl Problem<'_> {
             visibility: scalar(layout.visibility()),
         };
         let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(tape, &self.to_world, false));
-        let env = ImageVars::env(tape, self.env, false);
+        Scene {
+            probe,
+            posed,
+            env: ImageVars::env(tape, self.env, false),
+        }
+    }
+
+    /// View `v`'s re-render of `scene` in the pixels of `hits`.
+    fn render<'t>(&self, tape: &'t Tape<f32>, scene: &Scene<'t>, v: usize, hits: &PrimaryHits) -> [Var<'t, f32>; 3] {
+        let Scene { probe, posed, env } = scene;
         light_samples_with(
             tape,
             hits,
             self.views[v].camera,
-            &probe,
-            &posed,
+            probe,
+            posed,
             &self.mesh.triangles,
             &GgxMetal,
             &LightSampling::mis(&self.sampler).with_interreflection(),
         )
-        .radiance(&env)
+        .radiance(env)
     }
 
     /// The priors at textures `x`: the albedo's and the roughness's total
@@ -426,6 +431,13 @@ impl Problem<'_> {
         }
         [tape.item(albedo), tape.item(roughness), tape.item(visibility)]
     }
+}
+
+/// A step's probe and lighting on its tape.
+struct Scene<'t> {
+    probe: ProbeVars<'t, f32>,
+    posed: PosedMesh<'t, f32>,
+    env: ImageVars<'t, f32>,
 }
 
 /// The neighbouring texels (right and below) of a level's textures, as
