@@ -8,7 +8,7 @@ use render::image_io::RgbImage;
 
 use super::capture::Capture;
 use super::truth::Truth;
-use super::{AcquireSettings, Acquisition, acquire};
+use super::{AcquireSettings, Acquisition, Solver, acquire};
 use crate::error::{Error, Result};
 use crate::estimate::cli::{parse_quality, progress_bar, thread_pool};
 
@@ -31,11 +31,15 @@ pub struct AcquireArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Weight of the albedo's total-variation prior (default: the preset's):
+    /// Texture solve: adam (Adam on the re-rendering error) or least-squares
+    /// (a roughness search and an exact albedo solve: faster, see docs/results.md 13).
+    #[arg(long, default_value = "adam")]
+    pub solver: String,
+    /// Weight of the albedo's smoothness prior (default: the preset's):
     /// higher fills unseen or noisy texels more smoothly and blurs printed detail.
     #[arg(long)]
     pub albedo_smoothness: Option<f64>,
-    /// Weight of the roughness's total-variation prior (default: the preset's).
+    /// Weight of the roughness's smoothness prior (default: the preset's).
     #[arg(long)]
     pub roughness_smoothness: Option<f64>,
 }
@@ -46,6 +50,18 @@ fn weight(flag: &str, value: Option<f64>, preset: f64) -> Result<f64> {
         None => Ok(preset),
         Some(w) if w.is_finite() && w >= 0.0 => Ok(w),
         Some(w) => Err(Error::invalid(flag, format!("{w}: a weight is finite and at least 0"))),
+    }
+}
+
+/// The texture solve of `--solver`.
+fn parse_solver(s: &str) -> Result<Solver> {
+    match s {
+        "adam" => Ok(Solver::Adam),
+        "least-squares" => Ok(Solver::LeastSquares),
+        _ => Err(Error::invalid(
+            "--solver",
+            format!("`{s}` is not adam or least-squares"),
+        )),
     }
 }
 
@@ -74,17 +90,19 @@ const MAX_SIDE: usize = 4096;
 pub fn run(args: &AcquireArgs) -> Result<()> {
     let size = parse_texture_size(&args.texture_size)?;
     let mut settings = AcquireSettings::preset(parse_quality(&args.quality)?);
-    let material = &mut settings.material;
-    material.albedo_smoothness = weight(
-        "--albedo-smoothness",
-        args.albedo_smoothness,
-        material.albedo_smoothness,
-    )?;
-    material.roughness_smoothness = weight(
-        "--roughness-smoothness",
-        args.roughness_smoothness,
-        material.roughness_smoothness,
-    )?;
+    settings.solver = parse_solver(&args.solver)?;
+    let (albedo, roughness) = match settings.solver {
+        Solver::Adam => (
+            &mut settings.material.albedo_smoothness,
+            &mut settings.material.roughness_smoothness,
+        ),
+        Solver::LeastSquares => (
+            &mut settings.least_squares.albedo_smoothness,
+            &mut settings.least_squares.roughness_smoothness,
+        ),
+    };
+    *albedo = weight("--albedo-smoothness", args.albedo_smoothness, *albedo)?;
+    *roughness = weight("--roughness-smoothness", args.roughness_smoothness, *roughness)?;
     let pool = thread_pool(args.threads)?;
     let capture = Capture::read(&args.captures)?;
     let truth = Truth::read(&args.captures)?;

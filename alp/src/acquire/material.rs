@@ -22,9 +22,8 @@ use glam::{Vec2, Vec3};
 use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
 use render::bsdf::GgxMetal;
-use render::camera::Camera;
 use render::envmap::EnvMap;
-use render::image_io::{Mask, RgbImage};
+use render::image_io::RgbImage;
 use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
 use render::lookup::{ImageVars, TextureVars};
 use render::mesh::Mesh;
@@ -35,6 +34,7 @@ use render::sampling::{EnvSampler, Rng};
 use serde::Serialize;
 
 use super::capture::Capture;
+use super::observation::{FitView, luminance};
 use crate::error::{Error, Result};
 
 /// What the texture solve trades.
@@ -108,15 +108,23 @@ impl Default for MaterialSettings {
     }
 }
 
-/// One level of the solve, for the report.
+/// One stage of a solve, for the report.
 #[derive(Clone, Debug, Serialize)]
-pub struct LevelReport {
-    /// Texture width and height.
+pub struct StageReport {
+    /// "level" (an Adam level); with the least-squares solve, "roughness"
+    /// (a placement's search), "observation" (the albedo's renders) or
+    /// "albedo" (one texture size).
+    pub stage: String,
+    /// Texture or grid width and height (an observation: its pixels and hits).
     pub size: [usize; 2],
-    /// Adam steps taken.
-    pub steps: usize,
-    /// The data term's mean over the level's last tenth of steps.
+    /// Adam steps, rungs searched, or conjugate-gradient iterations.
+    pub iterations: usize,
+    /// The data term at the stage's end (an Adam level: its mean over the
+    /// last pass through the views; none for an observation).
     pub data_loss: f64,
+    /// Whether its answer went on: the placement chosen; a least-squares
+    /// albedo level the views resolve (see `albedo::AlbedoFit::definite`).
+    pub kept: bool,
     /// Seconds spent.
     pub seconds: f64,
 }
@@ -141,7 +149,7 @@ pub struct MaterialFit {
     /// How well the views saw each texel, in [0, 1], in every channel.
     pub coverage: RgbImage,
     pub terms: LossTerms,
-    pub levels: Vec<LevelReport>,
+    pub stages: Vec<StageReport>,
 }
 
 impl MaterialFit {
@@ -161,54 +169,6 @@ impl MaterialFit {
             },
         }
     }
-}
-
-/// A view as the fit reads it: its camera, its target pixels (well inside
-/// the probe) and their weights.
-struct FitView<'a> {
-    camera: &'a Camera,
-    /// Row-major index -> position in `target`, for the pixels fitted.
-    slot: Vec<Option<u32>>,
-    target: Vec<[f32; 3]>,
-}
-
-impl<'a> FitView<'a> {
-    fn new(camera: &'a Camera, image: &RgbImage, mask: &Mask) -> Self {
-        let inner = eroded(mask);
-        let mut slot = vec![None; inner.len()];
-        let mut target = Vec::new();
-        for (p, _) in inner.iter().enumerate().filter(|(_, inside)| **inside) {
-            slot[p] = Some(target.len() as u32);
-            target.push(image.pixels[p]);
-        }
-        FitView { camera, slot, target }
-    }
-}
-
-impl FitView<'_> {
-    /// The mean luminance of the pixels fitted.
-    fn mean_luminance(&self) -> f64 {
-        self.target.iter().map(|t| luminance(t) as f64).sum::<f64>() / self.target.len().max(1) as f64
-    }
-}
-
-/// The mask less its edge pixels (a pixel stays when its 4 neighbours are inside too).
-fn eroded(mask: &Mask) -> Vec<bool> {
-    let (w, h) = (mask.width, mask.height);
-    (0..w * h)
-        .map(|p| {
-            let (x, y) = (p % w, p / w);
-            mask.inside[p]
-                && x > 0
-                && y > 0
-                && x + 1 < w
-                && y + 1 < h
-                && mask.inside[p - 1]
-                && mask.inside[p + 1]
-                && mask.inside[p - w]
-                && mask.inside[p + w]
-        })
-        .collect()
 }
 
 /// The parameter vector's layout at one texture size: albedo RGB
@@ -256,7 +216,7 @@ impl Layout {
 }
 
 /// `image` resampled bilinearly (texel centres aligned) to `width` x `height`.
-fn resample(image: &RgbImage, width: usize, height: usize) -> RgbImage {
+pub(crate) fn resample(image: &RgbImage, width: usize, height: usize) -> RgbImage {
     let texture = Texture { image: image.clone() };
     let pixels = (0..width * height)
         .map(|p| {
@@ -527,7 +487,7 @@ pub fn solve(
         .expect("at least one placement");
     let problem = &problems[chosen];
     let (mut textures, first, mut terms) = coarse.swap_remove(chosen);
-    let mut levels = vec![first];
+    let mut stages = vec![first];
     for (level, &layout) in layouts.iter().enumerate().skip(1) {
         let done = (placements.len() + level - 1) * settings.steps;
         let (fitted, report, level_terms) = problem.fit_level(&tape, layout, &textures, level, &|step| {
@@ -535,7 +495,7 @@ pub fn solve(
         })?;
         textures = fitted;
         terms = level_terms;
-        levels.push(report);
+        stages.push(report);
     }
     let layout = *layouts.last().expect("at least one level");
     let coverage = coverage(problem, layout);
@@ -546,7 +506,7 @@ pub fn solve(
         visibility,
         coverage: RgbImage::new(layout.width, layout.height, coverage.iter().map(|&c| [c; 3]).collect()),
         terms,
-        levels,
+        stages,
     };
     Ok((fit, chosen))
 }
@@ -585,7 +545,7 @@ impl<'a> Problem<'a> {
         textures: &[RgbImage; 3],
         level: usize,
         progress: &dyn Fn(usize),
-    ) -> Result<([RgbImage; 3], LevelReport, LossTerms)> {
+    ) -> Result<([RgbImage; 3], StageReport, LossTerms)> {
         let t0 = Instant::now();
         let settings = self.settings;
         let n = layout.texels();
@@ -647,10 +607,12 @@ impl<'a> Problem<'a> {
         // The data term over the last pass through every view.
         let tail = views.div_ceil(per_step).min(data_history.len()).max(1);
         let data_loss = data_history.iter().rev().take(tail).sum::<f64>() / tail as f64;
-        let report = LevelReport {
+        let report = StageReport {
+            stage: "level".into(),
             size: [layout.width, layout.height],
-            steps: state.iter,
+            iterations: state.iter,
             data_loss,
+            kept: true,
             seconds: t0.elapsed().as_secs_f64(),
         };
         let terms = LossTerms {
@@ -705,11 +667,6 @@ fn coverage(problem: &Problem, layout: Layout) -> Vec<f32> {
     seen.iter().map(|&s| (s / well_seen).min(1.0) as f32).collect()
 }
 
-/// Rec. 709 luminance.
-fn luminance(rgb: &[f32; 3]) -> f32 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
-}
-
 /// The random stream (plus the pixel's index) of a step's share of a view's pixels.
 const PIXEL_SHARE_STREAM: u64 = 0x5A4E_0000_0000;
 
@@ -750,7 +707,7 @@ fn barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> [f32; 3] {
 /// weight-averaged values; going back up, a texel keeps its own value where
 /// its weight is 1, takes the coarser level's where it is 0, and blends
 /// between, so a hole takes the nearest seen values.
-fn fill(image: &RgbImage, weight: &[f32]) -> RgbImage {
+pub(crate) fn fill(image: &RgbImage, weight: &[f32]) -> RgbImage {
     let (w, h) = (image.width, image.height);
     if w <= 1 && h <= 1 {
         return image.clone();

@@ -3,12 +3,18 @@
 //! asset. Its input is the capture folder ([`capture`], which
 //! `alp synth captures` renders for a known probe); the scan is placed in
 //! the cameras' frame from the silhouettes ([`placement`]), then its
-//! textures are solved for by re-rendering every view ([`material`]).
+//! textures are solved for by re-rendering every view: by Adam
+//! ([`material`]) or by a roughness search and an exact albedo solve
+//! ([`least_squares`]).
 
+mod albedo;
 pub mod capture;
 pub mod cli;
+pub mod least_squares;
 pub mod material;
+mod observation;
 pub mod placement;
+mod roughness;
 pub mod truth;
 
 use std::time::Instant;
@@ -22,8 +28,21 @@ use serde::Serialize;
 use crate::error::Result;
 use crate::estimate::Quality;
 use capture::Capture;
-use material::{LevelReport, LossTerms, MaterialFit, MaterialSettings};
+use least_squares::LeastSquaresSettings;
+use material::{LossTerms, MaterialFit, MaterialSettings, StageReport};
 use placement::PlacementSettings;
+
+/// How the textures are solved for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Solver {
+    /// Adam on the re-rendering error, differentiated in the textures ([`material`]).
+    Adam,
+    /// A roughness search and an exact albedo solve ([`least_squares`]):
+    /// several times faster, the roughness closer; its albedo is worse where
+    /// a recess is lit by the probe's own reflections (docs/results.md 13).
+    LeastSquares,
+}
 
 /// Everything the acquisition can be told.
 #[derive(Clone, Debug, Serialize)]
@@ -32,7 +51,11 @@ pub struct AcquireSettings {
     pub quality: Quality,
     #[serde(skip)]
     pub placement: PlacementSettings,
+    pub solver: Solver,
+    /// The Adam solve's settings.
     pub material: MaterialSettings,
+    /// The least-squares solve's settings.
+    pub least_squares: LeastSquaresSettings,
     /// Samples per pixel of the report's re-renders (PSNR, preview).
     pub report_spp: u32,
 }
@@ -43,7 +66,9 @@ impl AcquireSettings {
         let default = AcquireSettings {
             quality,
             placement: PlacementSettings::default(),
+            solver: Solver::Adam,
             material: MaterialSettings::default(),
+            least_squares: LeastSquaresSettings::default(),
             report_spp: 16,
         };
         match quality {
@@ -56,6 +81,14 @@ impl AcquireSettings {
                     pixels_per_view: 4000,
                     ..default.material
                 },
+                least_squares: LeastSquaresSettings {
+                    spp: 8,
+                    pixels_per_view: 8000,
+                    search_spp: 2,
+                    search_pixels_per_view: 2000,
+                    roughness_rungs: 7,
+                    ..default.least_squares
+                },
                 report_spp: 8,
                 ..default
             },
@@ -66,6 +99,14 @@ impl AcquireSettings {
                     spp: 8,
                     pixels_per_view: 16000,
                     ..default.material
+                },
+                least_squares: LeastSquaresSettings {
+                    spp: 64,
+                    pixels_per_view: 32000,
+                    search_spp: 8,
+                    search_pixels_per_view: 8000,
+                    roughness_rungs: 12,
+                    ..default.least_squares
                 },
                 report_spp: 32,
                 ..default
@@ -105,7 +146,7 @@ pub struct AcquireReport {
     pub placement_loss: f64,
     /// The texture solve's terms at its end.
     pub loss: LossTerms,
-    pub levels: Vec<LevelReport>,
+    pub stages: Vec<StageReport>,
     pub views: Vec<ViewReport>,
     /// Mean coverage over the texture's texels.
     pub mean_coverage: f64,
@@ -141,10 +182,14 @@ pub fn acquire(
     let placements = placement::place(capture, &settings.placement)?;
     let placed = Instant::now();
     let poses: Vec<_> = placements.iter().map(|p| p.to_world).collect();
-    let (fit, chosen): (MaterialFit, usize) =
-        material::solve(capture, &poses, size, &settings.material, &|done, all| {
+    let (fit, chosen): (MaterialFit, usize) = match settings.solver {
+        Solver::Adam => material::solve(capture, &poses, size, &settings.material, &|done, all| {
             progress("textures", done, all)
-        })?;
+        })?,
+        Solver::LeastSquares => least_squares::solve(capture, &poses, size, &settings.least_squares, &|done, all| {
+            progress("textures", done, all)
+        })?,
+    };
     let placement = placements[chosen];
     let solved = Instant::now();
     let asset = fit.asset(name, &capture.mesh);
@@ -178,7 +223,7 @@ pub fn acquire(
         to_world: placement.to_world.to_world().transpose().to_cols_array_2d(),
         placement_loss: placement.loss,
         loss: fit.terms.clone(),
-        levels: fit.levels.clone(),
+        stages: fit.stages.clone(),
         views,
         mean_coverage: coverage_sum / fit.coverage.pixels.len() as f64,
         seconds: PhaseSeconds {

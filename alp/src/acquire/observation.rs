@@ -1,0 +1,387 @@
+//! The views' pixels as affine functions of the albedo at a fixed
+//! roughness: the texture solve's observations (PAPER.md, Sec. 3.2).
+//!
+//! The forward model (`render::integrator`: GGX metal, MIS, one bounce) is
+//! linear in the light and, through Schlick's Fresnel `F = A + (1 - A)(1 -
+//! cos)^5`, affine in the albedo `A` of the point a light sample leaves. So
+//! a hit's direct light is `offset + A(uv) * slope`, per channel, where the
+//! offset is its render with albedo 0 and the slope its render with albedo
+//! 1 less the offset, from the same samples. The bounce, whose light leaves
+//! two points, is linearised in the first one's albedo with the second's
+//! held at a given value (its render at albedo 1 times that value), and
+//! spread over the pixel's hits. A pixel, the
+//! mean of its hits, is then linear in the albedo texels its hits' bilinear
+//! taps read.
+//!
+//! Each pixel is observed twice, from two independent sample sets (halves):
+//! the product of the two residuals is an unbiased estimate of the squared
+//! error under Monte Carlo noise, where one render's square adds the noise's
+//! variance (which depends on the material and so biases it).
+
+use glam::{Vec2, Vec3};
+use render::bsdf::GgxMetal;
+use render::camera::Camera;
+use render::envmap::EnvMap;
+use render::image_io::{Mask, RgbImage};
+use render::integrator::{LightSamples, LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use render::lookup::{ImageVars, TextureVars};
+use render::mesh::Mesh;
+use render::pose::Pose;
+use render::posed::{PoseVars, PosedMesh, pack_pose};
+use render::probe::Texture;
+use render::sampling::{EnvSampler, Rng, stratified_square};
+
+use autodiff::Tape;
+
+use super::capture::Capture;
+
+/// A view as the fit reads it: its camera and its pixels well inside the
+/// probe (a mask's edge mixes in the background).
+pub(crate) struct FitView<'a> {
+    pub(crate) camera: &'a Camera,
+    /// Row-major index -> position in `target`, for the pixels fitted.
+    pub(crate) slot: Vec<Option<u32>>,
+    pub(crate) target: Vec<[f32; 3]>,
+}
+
+impl<'a> FitView<'a> {
+    pub(crate) fn new(camera: &'a Camera, image: &RgbImage, mask: &Mask) -> Self {
+        let inner = eroded(mask);
+        let mut slot = vec![None; inner.len()];
+        let mut target = Vec::new();
+        for (p, _) in inner.iter().enumerate().filter(|(_, inside)| **inside) {
+            slot[p] = Some(target.len() as u32);
+            target.push(image.pixels[p]);
+        }
+        FitView { camera, slot, target }
+    }
+
+    /// The mean luminance of the pixels fitted.
+    pub(crate) fn mean_luminance(&self) -> f64 {
+        self.target.iter().map(|t| luminance(t) as f64).sum::<f64>() / self.target.len().max(1) as f64
+    }
+}
+
+/// The mask less its edge pixels (a pixel stays when its 4 neighbours are inside too).
+fn eroded(mask: &Mask) -> Vec<bool> {
+    let (w, h) = (mask.width, mask.height);
+    (0..w * h)
+        .map(|p| {
+            let (x, y) = (p % w, p / w);
+            mask.inside[p]
+                && x > 0
+                && y > 0
+                && x + 1 < w
+                && y + 1 < h
+                && mask.inside[p - 1]
+                && mask.inside[p + 1]
+                && mask.inside[p - w]
+                && mask.inside[p + w]
+        })
+        .collect()
+}
+
+/// Rec. 709 luminance.
+pub(crate) fn luminance(rgb: &[f32; 3]) -> f32 {
+    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
+}
+
+/// The capture with its scan placed: what every observation renders.
+pub(crate) struct Placed<'a> {
+    pub(crate) mesh: &'a Mesh,
+    to_world: [f64; render::posed::POSE_PARAMS],
+    positions: Vec<Vec3>,
+    env: &'a EnvMap,
+    sampler: EnvSampler,
+    pub(crate) views: Vec<FitView<'a>>,
+}
+
+impl<'a> Placed<'a> {
+    pub(crate) fn new(capture: &'a Capture, to_world: &Pose) -> Self {
+        Placed {
+            mesh: &capture.mesh,
+            to_world: pack_pose(to_world),
+            positions: capture
+                .mesh
+                .positions
+                .iter()
+                .map(|&p| to_world.transform_point(p))
+                .collect(),
+            env: &capture.lighting,
+            sampler: EnvSampler::new(&capture.lighting),
+            views: capture
+                .views
+                .iter()
+                .map(|v| FitView::new(&v.photo.camera, &v.photo.image, &v.photo.mask))
+                .collect(),
+        }
+    }
+}
+
+/// How much an observation renders.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Budget {
+    /// Samples per pixel of each half.
+    pub(crate) spp: u32,
+    /// Most pixels of a view observed (a random share of a view with more).
+    pub(crate) pixels_per_view: usize,
+    /// A pixel's weight is 1 / (its luminance + this share of its view's mean)^2.
+    pub(crate) relative_floor: f64,
+    /// A pixel's hits closer than this in u and v are merged (about half a
+    /// texel of the finest texture read).
+    pub(crate) merge_uv: [f32; 2],
+    /// Seed of the samples and of the pixels' share: the same seed observes
+    /// the same pixels through the same primary rays at any roughness.
+    pub(crate) seed: u64,
+}
+
+/// One observed pixel.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PixelObservation {
+    /// The photo's value.
+    pub(crate) target: [f32; 3],
+    /// Its weight in the data term: relative squared error, each view's
+    /// pixels summing to 1 / (number of views).
+    pub(crate) weight: f64,
+    /// Per half: the render with albedo 0.
+    pub(crate) offset: [[f32; 3]; 2],
+}
+
+/// One hit's share of its pixel's slope.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HitSlope {
+    /// Texture coordinates of the point hit.
+    pub(crate) uv: Vec2,
+    /// The pixel's radiance per unit albedo at this point, RGB.
+    pub(crate) slope: [f32; 3],
+    /// Which sample set (0 or 1).
+    pub(crate) half: u8,
+}
+
+/// Every view's observed pixels, and their hits grouped by pixel.
+#[derive(Default)]
+pub(crate) struct Observations {
+    pub(crate) pixels: Vec<PixelObservation>,
+    /// The hits of pixel `p` are `hits[hit_start[p]..hit_start[p + 1]]`.
+    pub(crate) hit_start: Vec<usize>,
+    pub(crate) hits: Vec<HitSlope>,
+}
+
+impl Observations {
+    /// Hits of pixel `p`.
+    pub(crate) fn hits_of(&self, p: usize) -> &[HitSlope] {
+        &self.hits[self.hit_start[p]..self.hit_start[p + 1]]
+    }
+}
+
+/// Most samples per pixel one pass holds on its tape.
+const SPP_PER_PASS: u32 = 4;
+
+/// Start of the seeds of the second half's samples.
+const SECOND_HALF: u64 = 1 << 63;
+
+/// The random stream (plus the pixel's index) of a half's BRDF samples.
+const LIGHT_REDRAW_STREAM: u64 = 0x11D2_0000_0000;
+
+/// The random stream (plus the pixel's index) of a view's share of pixels.
+const PIXEL_SHARE_STREAM: u64 = 0x5A4E_0000_0000;
+
+/// Observes every view of `placed` with the roughness texture `roughness`,
+/// the bounce's second point at albedo `bounce_albedo`.
+pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32; 3], budget: &Budget) -> Observations {
+    let tape = Tape::<f32>::new();
+    let constant = |v: f32| TextureVars::new(&tape, &Texture::constant([v; 3]), false);
+    let zero = ProbeVars {
+        mesh: render::posed::MeshVars::new(&tape, placed.mesh),
+        albedo: constant(0.0),
+        roughness: TextureVars::new(&tape, roughness, false),
+        visibility: constant(1.0),
+    };
+    let one = ProbeVars {
+        albedo: constant(1.0),
+        ..zero
+    };
+    let posed = PosedMesh::new(&zero.mesh, &PoseVars::new(&tape, &placed.to_world, false));
+    let env = ImageVars::env(&tape, placed.env, false);
+    let mark = tape.mark();
+    let views = placed.views.len().max(1);
+    let mut out = Observations::default();
+    // Per observed pixel, its hits (merged where close).
+    let mut pixel_hits: Vec<Vec<HitSlope>> = Vec::new();
+    for view in &placed.views {
+        let share = budget.pixels_per_view as f32 / view.target.len().max(1) as f32;
+        let kept = |p: u32| {
+            view.slot[p as usize].is_some()
+                && (share >= 1.0 || Rng::new(budget.seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
+        };
+        // Per image pixel, its index in this view's observations.
+        let mut row = vec![u32::MAX; view.slot.len()];
+        let first = out.pixels.len();
+        // Per observed pixel of the view: which halves saw it (bits).
+        let mut halves: Vec<u8> = Vec::new();
+        let passes = budget.spp.max(1).div_ceil(SPP_PER_PASS);
+        for pass in 0..passes {
+            let spp = SPP_PER_PASS.min(budget.spp.max(1) - pass * SPP_PER_PASS);
+            let seed = budget.seed.wrapping_add((pass as u64) << 32);
+            let mut hits = PrimaryHits::trace(
+                placed.mesh,
+                &placed.positions,
+                view.camera,
+                &RenderSettings { spp, seed },
+            );
+            hits.retain_pixels(kept);
+            if hits.is_empty() {
+                continue;
+            }
+            for half in 0..2u8 {
+                if half == 1 {
+                    redraw_light_samples(&mut hits, seed ^ SECOND_HALF);
+                }
+                tape.reset_to(mark);
+                let direct = LightSampling::mis(&placed.sampler);
+                let triangles = &placed.mesh.triangles;
+                let dark = light_samples_with(&tape, &hits, view.camera, &zero, &posed, triangles, &GgxMetal, &direct);
+                let bright = light_samples_with(
+                    &tape,
+                    &hits,
+                    view.camera,
+                    &one,
+                    &posed,
+                    triangles,
+                    &GgxMetal,
+                    &direct.with_interreflection(),
+                );
+                let light = |samples: &LightSamples<'_, f32>| -> [Vec<f32>; 3] {
+                    let l = env.env_radiance(samples.wi);
+                    std::array::from_fn(|c| tape.to_vec(samples.throughput[c] * l[c]))
+                };
+                let n = hits.len();
+                let (dark_light, bright_light) = (light(&dark), light(&bright));
+                // Per pixel of the pass: the bounce's light at albedo 1 (both
+                // points), and its hits.
+                let segment = tape.to_vec(bright.segment);
+                let mut bounce = vec![[0.0f32; 3]; hits.pixels.len()];
+                for k in bright.direct..segment.len() {
+                    for c in 0..3 {
+                        bounce[segment[k] as usize][c] += bright_light[c][k];
+                    }
+                }
+                let mut count = vec![0u32; hits.pixels.len()];
+                for &s in &hits.segment {
+                    count[s as usize] += 1;
+                }
+                let pass_share = spp as f32 / budget.spp.max(1) as f32;
+                for &pixel in &hits.pixels {
+                    if row[pixel as usize] == u32::MAX {
+                        row[pixel as usize] = out.pixels.len() as u32;
+                        let target = view.target[view.slot[pixel as usize].expect("kept pixels are fitted") as usize];
+                        out.pixels.push(PixelObservation {
+                            target,
+                            weight: 0.0,
+                            offset: [[0.0; 3]; 2],
+                        });
+                        halves.push(0);
+                        pixel_hits.push(Vec::new());
+                    }
+                    halves[row[pixel as usize] as usize - first] |= 1 << half;
+                }
+                for i in 0..n {
+                    let j = hits.segment[i] as usize;
+                    let r = row[hits.pixels[j] as usize];
+                    let offset = &mut out.pixels[r as usize].offset[half as usize];
+                    let mut slope = [0.0f32; 3];
+                    for c in 0..3 {
+                        let dark_i = dark_light[c][i] + dark_light[c][i + n];
+                        let bright_i = bright_light[c][i] + bright_light[c][i + n];
+                        offset[c] += pass_share * dark_i;
+                        slope[c] = pass_share * (bright_i - dark_i + bounce_albedo[c] * bounce[j][c] / count[j] as f32);
+                    }
+                    merge(
+                        &mut pixel_hits[r as usize],
+                        HitSlope {
+                            uv: super::material::hit_uv(
+                                placed.mesh,
+                                &placed.positions,
+                                hits.triangle[i],
+                                hits.point[i],
+                            ),
+                            slope,
+                            half,
+                        },
+                        budget.merge_uv,
+                    );
+                }
+            }
+        }
+        // Weights: relative squared error, the view's pixels seen by both
+        // halves (all, but for a sample set that missed a pixel) summing to 1 / views.
+        let pixels = halves.iter().filter(|&&h| h == 3).count();
+        let floor = budget.relative_floor * view.mean_luminance();
+        for (p, &seen) in out.pixels[first..].iter_mut().zip(&halves) {
+            let scale = (luminance(&p.target).max(0.0) as f64 + floor).max(f64::MIN_POSITIVE);
+            p.weight = match seen {
+                3 => 1.0 / (scale * scale * pixels as f64 * views as f64),
+                _ => 0.0,
+            };
+        }
+    }
+    out.hit_start = Vec::with_capacity(pixel_hits.len() + 1);
+    out.hit_start.push(0);
+    for hits in pixel_hits {
+        out.hits.extend(hits);
+        out.hit_start.push(out.hits.len());
+    }
+    out
+}
+
+/// New random numbers, from `seed`, for the light samples of `hits` (the
+/// BRDF's and, through the seed, the env map's and the bounce's): the same
+/// primary rays, independent light. The two halves then differ by their
+/// light's noise alone; with their own rays too, a pixel's two rows would
+/// read different texels, and their product would reward a checkerboard.
+fn redraw_light_samples(hits: &mut PrimaryHits, seed: u64) {
+    hits.seed = seed;
+    let mut start = 0;
+    while start < hits.len() {
+        let segment = hits.segment[start];
+        let end = start + hits.segment[start..].iter().take_while(|&&s| s == segment).count();
+        let pixel = hits.pixels[segment as usize] as u64;
+        stratified_square(
+            &mut Rng::new(seed, LIGHT_REDRAW_STREAM + pixel),
+            &mut hits.random[start..end],
+        );
+        start = end;
+    }
+}
+
+/// Adds `hit` to a pixel's `hits`: into one of the same half within
+/// `tolerance` in u and v (which then stands for both at its own
+/// coordinates), else as a new one. A pixel's many samples then cost a
+/// few entries, not one each, while a pixel across a seam of the texture
+/// keeps a hit on each side.
+fn merge(hits: &mut Vec<HitSlope>, hit: HitSlope, tolerance: [f32; 2]) {
+    let near = |h: &&mut HitSlope| {
+        h.half == hit.half && (h.uv.x - hit.uv.x).abs() <= tolerance[0] && (h.uv.y - hit.uv.y).abs() <= tolerance[1]
+    };
+    match hits.iter_mut().find(|h| near(h)) {
+        Some(h) => (0..3).for_each(|c| h.slope[c] += hit.slope[c]),
+        None => hits.push(hit),
+    }
+}
+
+/// The bilinear taps (texel index, weight) of a `width` x `height`
+/// texture at OBJ texture coordinates `uv`, as `Texture::lookup` reads them
+/// (v = 0 the bottom row, clamped at the edges).
+pub(crate) fn texel_taps(uv: Vec2, width: usize, height: usize) -> [(usize, f32); 4] {
+    let x = (uv.x * width as f32 - 0.5).clamp(0.0, (width - 1) as f32);
+    let y = ((1.0 - uv.y) * height as f32 - 0.5).clamp(0.0, (height - 1) as f32);
+    let (col0, row0) = (x.floor() as usize, y.floor() as usize);
+    let (fx, fy) = (x - col0 as f32, y - row0 as f32);
+    let (col1, row1) = ((col0 + 1).min(width - 1), (row0 + 1).min(height - 1));
+    [
+        (row0 * width + col0, (1.0 - fx) * (1.0 - fy)),
+        (row0 * width + col1, fx * (1.0 - fy)),
+        (row1 * width + col0, (1.0 - fx) * fy),
+        (row1 * width + col1, fx * fy),
+    ]
+}
