@@ -139,6 +139,21 @@ fn bad_captures_are_clear_errors_naming_the_file() {
         }
     });
     assert!(err.contains("views") && err.contains("at least 2"), "{err}");
+    let err = case("camera_turned_away", &|at| {
+        let path = view(at).join("camera.json");
+        let mut camera: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("read")).expect("json");
+        let (origin, target) = (camera["origin"].clone(), camera["target"].clone());
+        let away: Vec<f64> = (0..3)
+            .map(|k| 2.0 * origin[k].as_f64().expect("x") - target[k].as_f64().expect("x"))
+            .collect();
+        camera["target"] = serde_json::json!(away);
+        std::fs::write(&path, camera.to_string()).expect("write")
+    });
+    assert!(
+        err.contains("view_001") && err.contains("camera.json") && err.contains("does not see"),
+        "{err}"
+    );
     let err = case("bad_lighting", &|at| {
         std::fs::write(at.join("lighting.exr"), b"not an exr").expect("write")
     });

@@ -7,13 +7,15 @@
 
 use std::path::Path;
 
+use glam::{DMat3, DVec3, Vec3};
 use render::RenderError;
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 use render::mesh::Mesh;
+use render::silhouette::mask_barycenter;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::estimate::Photo;
 
 /// The fewest views a capture holds: one silhouette cannot tell a shape's
@@ -82,7 +84,52 @@ impl Capture {
             .into_iter()
             .map(|name| read_view(&views_dir, name))
             .collect::<Result<Vec<_>>>()?;
-        Ok(Capture { mesh, lighting, views })
+        let capture = Capture { mesh, lighting, views };
+        // Every camera sees where the views' masks say the object stands.
+        let centre = capture.centre()?;
+        for view in &capture.views {
+            let camera = &view.photo.camera;
+            let (w, h) = (camera.width as f32, camera.height as f32);
+            let seen = camera
+                .project(centre)
+                .is_some_and(|p| (-0.5 * w..=1.5 * w).contains(&p.x) && (-0.5 * h..=1.5 * h).contains(&p.y));
+            if !seen {
+                return Err(RenderError::file(
+                    views_dir.join(&view.name).join("camera.json"),
+                    format!(
+                        "does not see the object its mask marks: the point where the views' rays through \
+                         their masks meet, ({:.3}, {:.3}, {:.3}), is behind this camera or far outside its image",
+                        centre.x, centre.y, centre.z
+                    ),
+                )
+                .into());
+            }
+        }
+        Ok(capture)
+    }
+
+    /// The point nearest (least squares) to the rays through every view's
+    /// mask centre: where the object stands.
+    pub fn centre(&self) -> Result<Vec3> {
+        let (mut a, mut b) = (DMat3::ZERO, DVec3::ZERO);
+        for view in &self.views {
+            let camera = &view.photo.camera;
+            let centre =
+                mask_barycenter(&view.photo.mask).ok_or_else(|| Error::invalid(view.name.clone(), "an empty mask"))?;
+            let d = camera.direction_through(centre.as_vec2()).as_dvec3().normalize();
+            let o = camera.origin.as_dvec3();
+            // (I - d d^T) (x - o) = 0 for each ray, summed.
+            let m = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+            a += m;
+            b += m * o;
+        }
+        if a.determinant().abs() < 1e-12 {
+            return Err(Error::invalid(
+                "views",
+                "their rays through the masks are parallel: the cameras must look from different directions",
+            ));
+        }
+        Ok((a.inverse() * b).as_vec3())
     }
 
     /// Writes the capture to the folder `dir` (which exists): `mesh.obj`,

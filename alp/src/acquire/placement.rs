@@ -9,7 +9,7 @@
 //! best few are fitted on, and the best kept. A turn about an axis of
 //! revolution does not show in silhouettes: the texture solve takes it up.
 
-use glam::{DVec3, Quat, Vec3};
+use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
 use autodiff::Tape;
@@ -19,7 +19,7 @@ use render::image_io::Mask;
 use render::mesh::{EdgeAdjacency, Mesh};
 use render::pose::Pose;
 use render::posed::{MeshVars, PoseVars, PosedMesh, pack_pose, unpack_pose};
-use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings, mask_barycenter};
+use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 
 use super::capture::Capture;
 use crate::error::{Error, Result};
@@ -151,7 +151,7 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
         })
     };
     let (coarse, full) = (silhouettes(Some(settings.coarse_height_px))?, silhouettes(None)?);
-    let centre = rays_meet(capture)?;
+    let centre = capture.centre()?;
     let (lo, hi) = capture.mesh.bounds();
     let (scan_centre, scan_radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
     let scale = world_radius(capture, centre) / scan_radius.max(f32::MIN_POSITIVE);
@@ -239,30 +239,6 @@ fn reduced(camera: &Camera, mask: &Mask, height_px: u32) -> Result<(Camera, Mask
         })
         .collect();
     Ok((shrunk, Mask::new(rw as usize, rh as usize, inside)))
-}
-
-/// The point nearest (least squares) to the rays through every view's mask
-/// centre: where the probe stands.
-fn rays_meet(capture: &Capture) -> Result<Vec3> {
-    let (mut a, mut b) = (glam::DMat3::ZERO, DVec3::ZERO);
-    for view in &capture.views {
-        let camera = &view.photo.camera;
-        let centre =
-            mask_barycenter(&view.photo.mask).ok_or_else(|| Error::invalid(view.name.clone(), "an empty mask"))?;
-        let d = camera.direction_through(centre.as_vec2()).as_dvec3().normalize();
-        let o = camera.origin.as_dvec3();
-        // (I - d d^T) (x - o) = 0 for each ray, summed.
-        let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-        a += m;
-        b += m * o;
-    }
-    if a.determinant().abs() < 1e-12 {
-        return Err(Error::invalid(
-            "views",
-            "their rays through the masks are parallel: the cameras must look from different directions",
-        ));
-    }
-    Ok((a.inverse() * b).as_vec3())
 }
 
 /// The radius (world units) of a sphere at `centre` whose silhouette has
