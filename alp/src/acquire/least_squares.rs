@@ -28,10 +28,10 @@ use serde::Serialize;
 
 use super::albedo::{AlbedoFit, AlbedoSolve, AlbedoSystem};
 use super::capture::Capture;
-use super::material::{LossTerms, MaterialFit, StageReport, resample};
+use super::material::{LossTerms, MaterialFit, StageReport, level_sizes, resample};
 use super::observation::{Budget, Observations, Placed, observe};
 use super::roughness::{RoughnessSearch, search};
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// What the texture solve trades.
 #[derive(Clone, Debug, Serialize)]
@@ -117,24 +117,8 @@ pub fn solve(
     settings: &LeastSquaresSettings,
     progress: &dyn Fn(usize, usize),
 ) -> Result<(MaterialFit, usize)> {
+    let sizes = level_sizes(size, placements.len(), settings.levels)?;
     let [width, height] = size;
-    if width == 0 || height == 0 {
-        return Err(Error::invalid(
-            "texture size",
-            format!("{width}x{height}: both sides must be at least 1"),
-        ));
-    }
-    if placements.is_empty() {
-        return Err(Error::invalid("placements", "none to solve the textures at"));
-    }
-    // Albedo levels halve the size down to no side below 4 texels (or the size itself).
-    let halvings = (0..settings.levels.max(1))
-        .take_while(|&k| (width >> k) >= 4.min(width) && (height >> k) >= 4.min(height))
-        .count();
-    let sizes: Vec<[usize; 2]> = (0..halvings)
-        .rev()
-        .map(|k| [(width >> k).max(1), (height >> k).max(1)])
-        .collect();
     let ladder = RoughnessSearch {
         rungs: settings.roughness_rungs.max(2),
         least: settings.min_roughness,

@@ -22,19 +22,18 @@ use glam::{Vec2, Vec3};
 use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
 use render::bsdf::GgxMetal;
-use render::envmap::EnvMap;
 use render::image_io::RgbImage;
 use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
 use render::lookup::{ImageVars, TextureVars};
 use render::mesh::Mesh;
 use render::pose::Pose;
-use render::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
+use render::posed::{MeshVars, PoseVars, PosedMesh};
 use render::probe::{ProbeAsset, Texture};
-use render::sampling::{EnvSampler, Rng};
+use render::sampling::Rng;
 use serde::Serialize;
 
 use super::capture::Capture;
-use super::observation::{FitView, luminance};
+use super::observation::{Placed, luminance};
 use crate::error::{Error, Result};
 
 /// What the texture solve trades.
@@ -229,24 +228,19 @@ pub(crate) fn resample(image: &RgbImage, width: usize, height: usize) -> RgbImag
 
 /// What every step reads: the scan placed, the lighting and its sampler, the views.
 struct Problem<'a> {
-    mesh: &'a Mesh,
-    to_world: [f64; render::posed::POSE_PARAMS],
-    positions: Vec<Vec3>,
-    env: &'a EnvMap,
-    sampler: EnvSampler,
-    views: Vec<FitView<'a>>,
+    placed: Placed<'a>,
     settings: &'a MaterialSettings,
 }
 
 impl Problem<'_> {
     /// The hits of view `v` in its fitted pixels, with sample seed `seed`.
     fn hits(&self, v: usize, seed: u64) -> PrimaryHits {
-        let view = &self.views[v];
+        let view = &self.placed.views[v];
         let settings = RenderSettings {
             spp: self.settings.spp,
             seed,
         };
-        let mut hits = PrimaryHits::trace(self.mesh, &self.positions, view.camera, &settings);
+        let mut hits = PrimaryHits::trace(self.placed.mesh, &self.placed.positions, view.camera, &settings);
         hits.retain_pixels(|p| view.slot[p as usize].is_some());
         hits
     }
@@ -265,7 +259,7 @@ impl Problem<'_> {
         }
         tape.clear();
         let params = tape.leaf(x);
-        let view = &self.views[v];
+        let view = &self.placed.views[v];
         let target: Vec<[f32; 3]> = a
             .pixels
             .iter()
@@ -314,7 +308,7 @@ impl Problem<'_> {
                 both[p as usize] |= bit;
             }
         }
-        let share = self.settings.pixels_per_view as f32 / self.views[v].target.len().max(1) as f32;
+        let share = self.settings.pixels_per_view as f32 / self.placed.views[v].target.len().max(1) as f32;
         let kept = |p: u32| {
             both[p as usize] == 3 && (share >= 1.0 || Rng::new(seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
         };
@@ -334,16 +328,16 @@ impl Problem<'_> {
         let triple = tape.constant(&(0..3 * n).map(|i| (i / 3) as f32).collect::<Vec<f32>>());
         let scalar = |range: std::ops::Range<usize>| image(params.slice(range.start, n).gather(triple));
         let probe = ProbeVars {
-            mesh: MeshVars::new(tape, self.mesh),
+            mesh: MeshVars::new(tape, self.placed.mesh),
             albedo: image(params.slice(0, 3 * n)),
             roughness: scalar(layout.roughness()),
             visibility: scalar(layout.visibility()),
         };
-        let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(tape, &self.to_world, false));
+        let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(tape, &self.placed.to_world, false));
         Scene {
             probe,
             posed,
-            env: ImageVars::env(tape, self.env, false),
+            env: ImageVars::env(tape, self.placed.env, false),
         }
     }
 
@@ -353,12 +347,12 @@ impl Problem<'_> {
         light_samples_with(
             tape,
             hits,
-            self.views[v].camera,
+            self.placed.views[v].camera,
             probe,
             posed,
-            &self.mesh.triangles,
+            &self.placed.mesh.triangles,
             &GgxMetal,
-            &LightSampling::mis(&self.sampler).with_interreflection(),
+            &LightSampling::mis(&self.placed.sampler).with_interreflection(),
         )
         .radiance(env)
     }
@@ -433,6 +427,29 @@ impl TexelPairs {
     }
 }
 
+/// The texture sizes of `levels` levels up to `size` (width, height),
+/// coarse to fine, each half the next (no side below 4 texels, or the
+/// size's own); an error for an empty size or no placements.
+pub(crate) fn level_sizes(size: [usize; 2], placements: usize, levels: usize) -> Result<Vec<[usize; 2]>> {
+    let [width, height] = size;
+    if width == 0 || height == 0 {
+        return Err(Error::invalid(
+            "texture size",
+            format!("{width}x{height}: both sides must be at least 1"),
+        ));
+    }
+    if placements == 0 {
+        return Err(Error::invalid("placements", "none to solve the textures at"));
+    }
+    let halvings = (0..levels.max(1))
+        .take_while(|&k| (width >> k) >= 4.min(width) && (height >> k) >= 4.min(height))
+        .count();
+    Ok((0..halvings)
+        .rev()
+        .map(|k| [(width >> k).max(1), (height >> k).max(1)])
+        .collect())
+}
+
 /// Solves for the material of the capture's scan at texture size `size`
 /// (width, height), placed at the first of `placements` whose coarsest
 /// level fits the views best (a scan's two ends can cast the same
@@ -445,27 +462,8 @@ pub fn solve(
     settings: &MaterialSettings,
     progress: &dyn Fn(usize, usize),
 ) -> Result<(MaterialFit, usize)> {
-    let [width, height] = size;
-    if width == 0 || height == 0 {
-        return Err(Error::invalid(
-            "texture size",
-            format!("{width}x{height}: both sides must be at least 1"),
-        ));
-    }
-    if placements.is_empty() {
-        return Err(Error::invalid("placements", "none to solve the textures at"));
-    }
-    // Levels halve the size down to no side below 4 texels (or the size itself).
-    let halvings = (0..settings.levels.max(1))
-        .take_while(|&k| (width >> k) >= 4.min(width) && (height >> k) >= 4.min(height))
-        .count();
-    let layouts: Vec<Layout> = (0..halvings)
-        .rev()
-        .map(|k| Layout {
-            width: (width >> k).max(1),
-            height: (height >> k).max(1),
-        })
-        .collect();
+    let sizes = level_sizes(size, placements.len(), settings.levels)?;
+    let layouts: Vec<Layout> = sizes.iter().map(|&[width, height]| Layout { width, height }).collect();
     let problems: Vec<Problem> = placements.iter().map(|p| Problem::new(capture, p, settings)).collect();
     let total_steps = (layouts.len() + placements.len() - 1) * settings.steps;
     let initial = [
@@ -514,21 +512,7 @@ pub fn solve(
 impl<'a> Problem<'a> {
     fn new(capture: &'a Capture, to_world: &Pose, settings: &'a MaterialSettings) -> Self {
         Problem {
-            mesh: &capture.mesh,
-            to_world: pack_pose(to_world),
-            positions: capture
-                .mesh
-                .positions
-                .iter()
-                .map(|&p| to_world.transform_point(p))
-                .collect(),
-            env: &capture.lighting,
-            sampler: EnvSampler::new(&capture.lighting),
-            views: capture
-                .views
-                .iter()
-                .map(|v| FitView::new(&v.photo.camera, &v.photo.image, &v.photo.mask))
-                .collect(),
+            placed: Placed::new(capture, to_world),
             settings,
         }
     }
@@ -566,7 +550,7 @@ impl<'a> Problem<'a> {
             .max_iters(steps)
             .build()
             .map_err(Error::solver("texture solve"))?;
-        let views = self.views.len();
+        let views = self.placed.views.len();
         let per_step = settings.views_per_step.clamp(1, views);
         let (mut evaluation, mut data_history, mut priors) = (0usize, Vec::with_capacity(steps + 1), [0.0; 3]);
         let (mut mean_x, mut averaged) = (vec![0.0; layout.len()], 0usize);
@@ -643,14 +627,14 @@ fn coverage(problem: &Problem, layout: Layout) -> Vec<f32> {
         let y = ((1.0 - uv.y) * layout.height as f32 - 0.5).clamp(0.0, (layout.height - 1) as f32);
         (x, y)
     };
-    for (v, view) in problem.views.iter().enumerate() {
+    for (v, view) in problem.placed.views.iter().enumerate() {
         let hits = problem.hits(v, COVERAGE_SEED);
         let floor = problem.settings.relative_floor * view.mean_luminance();
         for (k, &triangle) in hits.triangle.iter().enumerate() {
             let pixel = hits.pixels[hits.segment[k] as usize] as usize;
             let target = luminance(&view.target[view.slot[pixel].expect("kept pixels are fitted") as usize]) as f64;
             let signal = target.max(0.0) / (target.max(0.0) + floor).max(f64::MIN_POSITIVE);
-            let uv = hit_uv(problem.mesh, &problem.positions, triangle, hits.point[k]);
+            let uv = hit_uv(problem.placed.mesh, &problem.placed.positions, triangle, hits.point[k]);
             let (x, y) = texture(uv);
             let (col0, row0) = (x.floor() as usize, y.floor() as usize);
             let (fx, fy) = ((x - col0 as f32) as f64, (y - row0 as f32) as f64);

@@ -89,10 +89,10 @@ pub(crate) fn luminance(rgb: &[f32; 3]) -> f32 {
 /// The capture with its scan placed: what every observation renders.
 pub(crate) struct Placed<'a> {
     pub(crate) mesh: &'a Mesh,
-    to_world: [f64; render::posed::POSE_PARAMS],
-    positions: Vec<Vec3>,
-    env: &'a EnvMap,
-    sampler: EnvSampler,
+    pub(crate) to_world: [f64; render::posed::POSE_PARAMS],
+    pub(crate) positions: Vec<Vec3>,
+    pub(crate) env: &'a EnvMap,
+    pub(crate) sampler: EnvSampler,
     pub(crate) views: Vec<FitView<'a>>,
 }
 
