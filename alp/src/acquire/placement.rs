@@ -2,7 +2,7 @@
 //! silhouette: the first step of the acquisition (PAPER.md, Sec. 3.2). A
 //! scan comes in any frame and at any scale, so the fit starts from the
 //! views themselves: the centre where the rays through the masks' centres
-//! meet, the size at which the scan's bounding sphere spans the masks, and
+//! meet, the size at which the scan's mean outline spans the masks, and
 //! its axis (of revolution, else of its spread: `symmetry::axis_to_y`)
 //! pointed in directions spread over the sphere. Each start is fitted by
 //! Adam on the soft masks' L1 and Chamfer losses summed over the views; the
@@ -153,8 +153,8 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
     let (coarse, full) = (silhouettes(Some(settings.coarse_height_px))?, silhouettes(None)?);
     let centre = capture.centre()?;
     let (lo, hi) = capture.mesh.bounds();
-    let (scan_centre, scan_radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
-    let scale = world_radius(capture, centre) / scan_radius.max(f32::MIN_POSITIVE);
+    let scan_centre = 0.5 * (lo + hi);
+    let scale = world_radius(capture, centre) / outline_radius(&capture.mesh).max(f32::MIN_POSITIVE);
     let depth = capture
         .views
         .iter()
@@ -242,8 +242,7 @@ fn reduced(camera: &Camera, mask: &Mask, height_px: u32) -> Result<(Camera, Mask
 }
 
 /// The radius (world units) of a sphere at `centre` whose silhouette has
-/// the masks' mean area: the bounding sphere of a probe is larger than its
-/// silhouette, and the fit's log-scale closes the gap.
+/// the masks' mean area.
 fn world_radius(capture: &Capture, centre: Vec3) -> f32 {
     let radii: Vec<f32> = capture
         .views
@@ -256,6 +255,24 @@ fn world_radius(capture: &Capture, centre: Vec3) -> f32 {
         })
         .collect();
     radii.iter().sum::<f32>() / radii.len() as f32
+}
+
+/// The radius of the disc whose area is the scan's mean outline area over
+/// all view directions: for a convex body a quarter of its surface area
+/// (Cauchy's formula), so `sqrt(area / 4 pi)`. The start's size matches
+/// the masks' mean area with it: a bounding sphere overstates a squat
+/// probe's outline (a thermos cap started at 55 % of its size, which 40
+/// steps of every start could not close).
+fn outline_radius(mesh: &Mesh) -> f32 {
+    let area: f32 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    (area / (4.0 * std::f32::consts::PI)).sqrt()
 }
 
 /// `n` directions spread evenly over the sphere (a Fibonacci lattice).
