@@ -217,8 +217,6 @@ pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32;
         // Per image pixel, its index in this view's observations.
         let mut row = vec![u32::MAX; view.slot.len()];
         let first = out.pixels.len();
-        // Per observed pixel of the view: which halves saw it (bits).
-        let mut halves: Vec<u8> = Vec::new();
         let passes = budget.spp.max(1).div_ceil(SPP_PER_PASS);
         for pass in 0..passes {
             let spp = SPP_PER_PASS.min(budget.spp.max(1) - pass * SPP_PER_PASS);
@@ -280,10 +278,8 @@ pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32;
                             weight: 0.0,
                             offset: [[0.0; 3]; 2],
                         });
-                        halves.push(0);
                         pixel_hits.push(Vec::new());
                     }
-                    halves[row[pixel as usize] as usize - first] |= 1 << half;
                 }
                 for i in 0..n {
                     let j = hits.segment[i] as usize;
@@ -313,16 +309,13 @@ pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32;
                 }
             }
         }
-        // Weights: relative squared error, the view's pixels seen by both
-        // halves (all, but for a sample set that missed a pixel) summing to 1 / views.
-        let pixels = halves.iter().filter(|&&h| h == 3).count();
+        // Weights: relative squared error, the view's pixels summing to 1 /
+        // views (both halves read the same hits, so every pixel has both).
+        let pixels = out.pixels.len() - first;
         let floor = budget.relative_floor * view.mean_luminance();
-        for (p, &seen) in out.pixels[first..].iter_mut().zip(&halves) {
+        for p in &mut out.pixels[first..] {
             let scale = (luminance(&p.target).max(0.0) as f64 + floor).max(f64::MIN_POSITIVE);
-            p.weight = match seen {
-                3 => 1.0 / (scale * scale * pixels as f64 * views as f64),
-                _ => 0.0,
-            };
+            p.weight = 1.0 / (scale * scale * pixels as f64 * views as f64);
         }
     }
     out.hit_start = Vec::with_capacity(pixel_hits.len() + 1);
