@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-use super::observation::{Observations, texel_taps};
+use super::observation::{Observations, grid_neighbours, grid_pairs, texel_taps};
 
 /// What the solve trades.
 #[derive(Clone, Copy, Debug)]
@@ -151,6 +151,9 @@ pub(crate) struct AlbedoSystem<'a> {
     height: usize,
     halves: [Half; 2],
     weight: Vec<f64>,
+    /// Per texel, both halves' `sum w J^2`: the data's curvature there, as
+    /// if the halves agreed (the preconditioner's and the coverage's).
+    data_diagonal: Vec<[f64; 3]>,
     settings: AlbedoSolve,
 }
 
@@ -176,12 +179,25 @@ pub(crate) struct AlbedoFit {
 
 impl<'a> AlbedoSystem<'a> {
     pub(crate) fn new(obs: &'a Observations, width: usize, height: usize, settings: AlbedoSolve) -> Self {
+        let halves = [0, 1].map(|h| Half::new(obs, h, width, height));
+        let weight: Vec<f64> = obs.pixels.iter().map(|p| p.weight).collect();
+        let data_diagonal = (0..width * height)
+            .into_par_iter()
+            .map(|k| {
+                let (a, b) = (
+                    halves[0].weighted_squares(&weight, k),
+                    halves[1].weighted_squares(&weight, k),
+                );
+                std::array::from_fn(|c| a[c] + b[c])
+            })
+            .collect();
         AlbedoSystem {
             obs,
             width,
             height,
-            halves: [0, 1].map(|h| Half::new(obs, h, width, height)),
-            weight: obs.pixels.iter().map(|p| p.weight).collect(),
+            halves,
+            weight,
+            data_diagonal,
             settings,
         }
     }
@@ -233,14 +249,7 @@ impl<'a> AlbedoSystem<'a> {
         let (w, h) = (self.width, self.height);
         let (lambda, ridge) = (2.0 * self.prior_weight(), 2.0 * RIDGE / self.texels() as f64);
         y.par_iter_mut().enumerate().for_each(|(k, yk)| {
-            let (col, row) = (k % w, k / w);
-            let neighbours = [
-                (col > 0).then(|| k - 1),
-                (col + 1 < w).then(|| k + 1),
-                (row > 0).then(|| k - w),
-                (row + 1 < h).then(|| k + w),
-            ];
-            for n in neighbours.into_iter().flatten() {
+            for n in grid_neighbours(k, w, h).into_iter().flatten() {
                 for c in 0..3 {
                     yk[c] += lambda * (x[k][c] - x[n][c]);
                 }
@@ -277,16 +286,8 @@ impl<'a> AlbedoSystem<'a> {
         (0..self.texels())
             .into_par_iter()
             .map(|k| {
-                let (a, b) = (
-                    self.halves[0].weighted_squares(&self.weight, k),
-                    self.halves[1].weighted_squares(&self.weight, k),
-                );
-                let (col, row) = (k % w, k / w);
-                let degree = [col > 0, col + 1 < w, row > 0, row + 1 < h]
-                    .iter()
-                    .filter(|&&b| b)
-                    .count() as f64;
-                std::array::from_fn(|c| a[c] + b[c] + lambda * degree + ridge)
+                let degree = grid_neighbours(k, w, h).iter().flatten().count() as f64;
+                self.data_diagonal[k].map(|d| d + lambda * degree + ridge)
             })
             .collect()
     }
@@ -327,14 +328,10 @@ impl<'a> AlbedoSystem<'a> {
             .map(|p| (0..3).map(|c| residuals[0][p][c] * residuals[1][p][c]).sum::<f64>() * self.weight[p] / 3.0)
             .sum();
         let luminance = [0.2126, 0.7152, 0.0722];
-        let information = (0..n)
-            .map(|k| {
-                let (a, b) = (
-                    self.halves[0].weighted_squares(&self.weight, k),
-                    self.halves[1].weighted_squares(&self.weight, k),
-                );
-                (0..3).map(|c| luminance[c] * (a[c] + b[c]) / 2.0).sum::<f64>() * n as f64
-            })
+        let information = self
+            .data_diagonal
+            .iter()
+            .map(|d| (0..3).map(|c| luminance[c] * d[c] / 2.0).sum::<f64>() * n as f64)
             .collect();
         AlbedoFit {
             smoothness: self.smoothness_of(&x),
@@ -351,11 +348,7 @@ impl<'a> AlbedoSystem<'a> {
         let (w, h) = (self.width, self.height);
         let (mut sum, mut pairs) = (0.0, 0usize);
         for k in 0..w * h {
-            let (col, row) = (k % w, k / w);
-            for n in [(col + 1 < w).then(|| k + 1), (row + 1 < h).then(|| k + w)]
-                .into_iter()
-                .flatten()
-            {
+            for n in grid_pairs(k, w, h).into_iter().flatten() {
                 sum += (0..3).map(|c| (x[k][c] - x[n][c]).powi(2)).sum::<f64>() / 3.0;
                 pairs += 1;
             }

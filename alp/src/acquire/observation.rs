@@ -378,3 +378,21 @@ pub(crate) fn texel_taps(uv: Vec2, width: usize, height: usize) -> [(usize, f32)
         (row1 * width + col1, fx * fy),
     ]
 }
+
+/// The 4-neighbours (left, right, up, down) of cell `k` of a row-major
+/// `width` x `height` grid, where they exist.
+pub(crate) fn grid_neighbours(k: usize, width: usize, height: usize) -> [Option<usize>; 4] {
+    let (col, row) = (k % width, k / width);
+    [
+        (col > 0).then(|| k - 1),
+        (col + 1 < width).then(|| k + 1),
+        (row > 0).then(|| k - width),
+        (row + 1 < height).then(|| k + width),
+    ]
+}
+
+/// The right and lower neighbours of cell `k` (each neighbouring pair once).
+pub(crate) fn grid_pairs(k: usize, width: usize, height: usize) -> [Option<usize>; 2] {
+    let [_, right, _, down] = grid_neighbours(k, width, height);
+    [right, down]
+}

@@ -13,7 +13,7 @@ use render::image_io::RgbImage;
 use render::probe::Texture;
 
 use super::material::fill;
-use super::observation::{Budget, Observations, Placed, observe, texel_taps};
+use super::observation::{Budget, Observations, Placed, grid_neighbours, grid_pairs, observe, texel_taps};
 
 /// What the search trades.
 #[derive(Clone, Copy, Debug)]
@@ -139,13 +139,7 @@ pub(crate) fn search(
     // Each cell's errors with its neighbours' pooled in.
     let pooled: Vec<Vec<f64>> = (0..cells)
         .map(|k| {
-            let (col, row) = (k % cw, k / cw);
-            let neighbours = [
-                (col > 0).then(|| k - 1),
-                (col + 1 < cw).then(|| k + 1),
-                (row > 0).then(|| k - cw),
-                (row + 1 < ch).then(|| k + cw),
-            ];
+            let neighbours = grid_neighbours(k, cw, ch);
             (0..ladder.len())
                 .map(|j| {
                     error[k][j] + settings.smoothness * neighbours.iter().flatten().map(|&n| error[n][j]).sum::<f64>()
@@ -157,15 +151,12 @@ pub(crate) fn search(
     let mut roughness = vec![0.0f64; cells];
     let mut pooled_seen = vec![0.0f64; cells];
     for k in 0..cells {
-        let (col, row) = (k % cw, k / cw);
-        let around = [
-            Some(k),
-            (col > 0).then(|| k - 1),
-            (col + 1 < cw).then(|| k + 1),
-            (row > 0).then(|| k - cw),
-            (row + 1 < ch).then(|| k + cw),
-        ];
-        pooled_seen[k] = around.iter().flatten().map(|&n| seen[n]).sum();
+        pooled_seen[k] = seen[k]
+            + grid_neighbours(k, cw, ch)
+                .iter()
+                .flatten()
+                .map(|&n| seen[n])
+                .sum::<f64>();
         roughness[k] = refined_minimum(&log_ladder, &pooled[k]).exp();
     }
     let (mut data, mut weight_sum, mut mean_albedo) = (0.0, 0.0, [0.0f64; 3]);
@@ -187,11 +178,7 @@ pub(crate) fn search(
     let variation = {
         let (mut sum, mut pairs) = (0.0, 0usize);
         for k in 0..cells {
-            let (col, row) = (k % cw, k / cw);
-            for n in [(col + 1 < cw).then(|| k + 1), (row + 1 < ch).then(|| k + cw)]
-                .into_iter()
-                .flatten()
-            {
+            for n in grid_pairs(k, cw, ch).into_iter().flatten() {
                 sum += (filled.pixels[k][0] - filled.pixels[n][0]).abs() as f64;
                 pairs += 1;
             }
