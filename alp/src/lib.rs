@@ -14,6 +14,7 @@ pub mod objective;
 pub mod output;
 pub mod probes;
 pub mod relight;
+pub mod study;
 pub mod synth;
 
 pub use crate::error::{Error, Result};

@@ -41,6 +41,11 @@ enum Command {
         #[command(subcommand)]
         action: ProbeAction,
     },
+    /// Studies of the estimate on a set of scenes, with tables and charts: speed against accuracy.
+    Study {
+        #[command(subcommand)]
+        study: alp::study::cli::StudyCommand,
+    },
 }
 
 #[derive(clap::Args)]
@@ -208,6 +213,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Estimate(args) => alp::estimate::cli::run(&args),
         Command::Acquire(args) => alp::acquire::cli::run(&args),
+        Command::Study { study } => alp::study::cli::run(&study),
         Command::Render(args) => render(&args),
         Command::Relight(args) => relight(&args),
         Command::Eval(args) => eval(&args),

@@ -11,6 +11,8 @@ use render::pose::Pose;
 
 use crate::error::{Error, Result};
 
+use super::lighting::LightingMethod;
+use super::settings::ADAM_LIGHTING;
 use super::{Photo, Quality, Settings, estimate_with_progress};
 use crate::objective::Objective;
 
@@ -61,6 +63,11 @@ pub struct EstimateArgs {
     /// too wide or too narrow. Costs a few lighting solves more.
     #[arg(long)]
     pub size_search: bool,
+    /// How the lighting is solved: `least-squares` (the exact bounded
+    /// solve) or `adam` (the paper's recipe: many Adam steps on the same
+    /// loss, several times the time).
+    #[arg(long, default_value = "least-squares")]
+    pub lighting: String,
 }
 
 pub(crate) fn parse_quality(q: &str) -> Result<Quality> {
@@ -71,6 +78,17 @@ pub(crate) fn parse_quality(q: &str) -> Result<Quality> {
         other => Err(Error::invalid(
             "--quality",
             format!("`{other}` is not one of fast, default, best"),
+        )),
+    }
+}
+
+pub(crate) fn parse_lighting(method: &str) -> Result<LightingMethod> {
+    match method {
+        "least-squares" => Ok(LightingMethod::LeastSquares),
+        "adam" => Ok(ADAM_LIGHTING),
+        other => Err(Error::invalid(
+            "--lighting",
+            format!("`{other}` is not one of least-squares, adam"),
         )),
     }
 }
@@ -96,6 +114,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     let mut settings = Settings::new(parse_quality(&args.quality)?);
     settings.seed = args.seed;
     settings.env_size = parse_size(&args.env_size)?;
+    settings.lighting.method = parse_lighting(&args.lighting)?;
     if let Some(rounds) = args.rounds {
         settings.joint.rounds = rounds;
     }

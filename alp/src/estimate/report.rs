@@ -132,8 +132,25 @@ pub struct PhaseReport {
 
 /// The process's resident set size, MB (Linux `/proc/self/status`; None elsewhere).
 pub fn resident_mb() -> Option<f64> {
+    status_mb("VmRSS:")
+}
+
+/// The process's peak resident set size since it started or since
+/// [`reset_peak_resident`], MB (Linux; None elsewhere).
+pub fn peak_resident_mb() -> Option<f64> {
+    status_mb("VmHWM:")
+}
+
+/// Restarts [`peak_resident_mb`] from the present resident size (Linux
+/// 4.0 and later; elsewhere the peak stays the process's).
+pub fn reset_peak_resident() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+/// A `/proc/self/status` field in kB, as MB.
+fn status_mb(field: &str) -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let line = status.lines().find(|l| l.starts_with(field))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
 }
@@ -280,5 +297,26 @@ impl<'a> PhaseLog<'a> {
     /// The run found `fewer` phases to do than planned.
     pub(super) fn expect_fewer(&mut self, fewer: usize) {
         self.expected = self.expected.saturating_sub(fewer).max(self.phases.len());
+    }
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_peak_restarts_below_a_freed_allocation() {
+        let before = resident_mb().expect("Linux tells the resident size");
+        let big = vec![1u8; 256 << 20];
+        assert!(std::hint::black_box(&big).iter().step_by(4096).all(|&b| b == 1));
+        let with = peak_resident_mb().expect("and its peak");
+        drop(big);
+        reset_peak_resident();
+        let after = peak_resident_mb().expect("the peak again");
+        assert!(with > before + 200.0, "peak {with} MB, resident {before} MB before");
+        assert!(
+            after < with - 200.0,
+            "the peak stayed at {after} MB after the reset ({with} MB)"
+        );
     }
 }

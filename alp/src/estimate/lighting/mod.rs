@@ -19,7 +19,7 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
-pub use least_squares::{DataTerm, LightingSolve, Smoothness, Solved, pyramid, solve};
+pub use least_squares::{DataTerm, LightingMethod, LightingSolve, Smoothness, Solved, pyramid, solve};
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
 
 use super::Probe;
@@ -252,6 +252,7 @@ pub(super) fn fit_lighting(
         },
         clipped_light_share: lighting.clipped_light_share,
         max_iters,
+        method: lighting.method,
     };
     let at = |(w, h): (usize, usize)| record.transport(w, h);
     let (transport, solved) = match start {

@@ -1,0 +1,126 @@
+//! `alp study ...`: the study commands, from flags to an output folder.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use crate::error::{Error, Result};
+use crate::estimate::cli::progress_bar;
+use crate::relight::RelightSettings;
+
+use super::record::write_atomically;
+use super::{DEFAULT, Method, RunContext, chart, mitsuba_available, speed_accuracy, summary};
+
+/// The studies.
+#[derive(clap::Subcommand, Debug)]
+pub enum StudyCommand {
+    /// Speed against accuracy: the estimate on every scene under each knob
+    /// that trades time for accuracy (quality presets, samples per pixel,
+    /// orientation starts, the working map's resolution, the lighting
+    /// solve, threads), swept one at a time from the default.
+    SpeedAccuracy(SpeedAccuracyArgs),
+}
+
+/// Flags of `alp study speed-accuracy`.
+#[derive(clap::Args, Debug)]
+pub struct SpeedAccuracyArgs {
+    /// Scene folders, or folders of scene folders (FORMATS.md, "Scene folder").
+    #[arg(long, num_args = 1.., required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// Output folder: results.jsonl (kept: a rerun skips the runs it holds),
+    /// results.csv, summary.csv, summary.md, speed_accuracy.svg.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Worker threads of the default setting's runs.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// The knob families to sweep, comma-separated (default: all of quality,
+    /// spp, starts, map, lighting, threads, true-pose, mitsuba).
+    #[arg(long, value_delimiter = ',')]
+    pub families: Option<Vec<String>>,
+    /// Samples per pixel of the relit spheres that score each run, a square.
+    #[arg(long, default_value_t = 256)]
+    pub eval_spp: u32,
+    /// The Python that runs the outside method (`tools/mitsuba_lighting.py`,
+    /// Mitsuba 3): when it cannot import Mitsuba, the `mitsuba` family is
+    /// skipped with a note.
+    #[arg(long, default_value = "python3")]
+    pub mitsuba_python: PathBuf,
+}
+
+/// Runs a study command.
+pub fn run(command: &StudyCommand) -> Result<()> {
+    match command {
+        StudyCommand::SpeedAccuracy(args) => speed_accuracy_run(args),
+    }
+}
+
+fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
+    if args.threads == 0 {
+        return Err(Error::invalid("--threads", "needs at least one thread"));
+    }
+    let families = args
+        .families
+        .clone()
+        .unwrap_or_else(|| speed_accuracy::FAMILIES.map(String::from).to_vec());
+    let mut variants = speed_accuracy::sweep(&families, args.threads)?;
+    let eval = RelightSettings {
+        spp: args.eval_spp,
+        seed: 0,
+    };
+    let mut notes = Vec::new();
+    let wants_mitsuba = variants.iter().any(|v| matches!(v.method, Method::MitsubaAdam { .. }));
+    let mitsuba_python = match wants_mitsuba.then(|| mitsuba_available(&args.mitsuba_python)) {
+        Some(Ok(())) => Some(args.mitsuba_python.clone()),
+        Some(Err(why)) => {
+            let note = format!(
+                "The outside method (Mitsuba 3, `tools/mitsuba_lighting.py`) was skipped: `{}` cannot run it ({why}).",
+                args.mitsuba_python.display()
+            );
+            eprintln!("alp study: {note}");
+            notes.push(note);
+            variants.retain(|v| !matches!(v.method, Method::MitsubaAdam { .. }));
+            None
+        }
+        None => None,
+    };
+    let context = RunContext { eval, mitsuba_python };
+    let strata = (args.eval_spp as f64).sqrt().round() as u32;
+    if args.eval_spp == 0 || strata * strata != args.eval_spp {
+        return Err(Error::invalid(
+            "--eval-spp",
+            format!("{} is not a square (1, 4, 9, ...)", args.eval_spp),
+        ));
+    }
+    let scenes = super::scenes::find(&args.scenes)?;
+    let bar = progress_bar(
+        std::io::stderr().is_terminal(),
+        "alp study {bar:30} {pos}/{len} runs, {elapsed} (eta {eta}) {msg}",
+    );
+    let results = super::run(&scenes, &variants, &args.out, &context, &mut |done, total, what| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+        bar.set_message(what.to_string());
+    });
+    bar.finish_and_clear();
+    let results = results?;
+    results.write_csv()?;
+    let summaries = summary::summarize(&results.rows);
+    write_atomically(&args.out.join("summary.csv"), &summary::to_csv(&summaries))?;
+    let mut table = summary::to_markdown(&summaries);
+    for note in &notes {
+        table += &format!("\n{note}\n");
+    }
+    write_atomically(&args.out.join("summary.md"), &table)?;
+    write_atomically(
+        &args.out.join("speed_accuracy.svg"),
+        &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART)?,
+    )?;
+    println!("{table}");
+    eprintln!(
+        "alp study: {} runs in {}; the chart is {}",
+        results.rows.len(),
+        args.out.display(),
+        args.out.join("speed_accuracy.svg").display()
+    );
+    Ok(())
+}

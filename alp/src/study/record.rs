@@ -1,0 +1,250 @@
+//! A study's rows: one per run, kept in `results.jsonl` as they finish (so
+//! that a rerun skips them), and written out whole as `results.csv`.
+
+use std::collections::BTreeSet;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use render::RenderError;
+use serde::{Deserialize, Serialize};
+
+use crate::error::Result;
+
+/// One run: a scene under one setting.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    /// The scene folder's name.
+    pub scene: String,
+    /// The knob family (`quality`, `spp`, ...; `default` for the default setting).
+    pub family: String,
+    /// The setting, as `knob=value` (the key a rerun skips by, with the scene).
+    pub variant: String,
+    /// Worker threads.
+    pub threads: usize,
+    /// Mean angular error of the relit mirror sphere, degrees (none when the run failed).
+    pub mirror_deg: Option<f64>,
+    /// ... of the shiny sphere.
+    pub shiny_deg: Option<f64>,
+    /// ... of the diffuse sphere.
+    pub diffuse_deg: Option<f64>,
+    /// Scale-invariant RMSE of the mirror sphere.
+    pub mirror_si_rmse: Option<f64>,
+    /// ... of the shiny sphere.
+    pub shiny_si_rmse: Option<f64>,
+    /// ... of the diffuse sphere.
+    pub diffuse_si_rmse: Option<f64>,
+    /// The pose's rotation error, degrees.
+    pub rotation_deg: Option<f64>,
+    /// The angle between the estimated and true axes (mesh +Y), degrees.
+    pub axis_deg: Option<f64>,
+    /// The translation's error, millimetres.
+    pub translation_mm: Option<f64>,
+    /// Whether the pose's observable part was found (`scenes::Observable`;
+    /// none when the run was given the true pose, or failed).
+    pub pose_found: Option<bool>,
+    /// Wall time of the estimate, seconds (the evaluation not counted).
+    pub wall_s: f64,
+    /// The process's peak resident memory during the estimate, MB (where the system tells it).
+    pub peak_mb: Option<f64>,
+    /// Why the run failed (a clear error of the estimate), if it did.
+    pub error: Option<String>,
+}
+
+impl Row {
+    /// The three angular errors, when the run succeeded.
+    pub fn angular(&self) -> Option<[f64; 3]> {
+        Some([self.mirror_deg?, self.shiny_deg?, self.diffuse_deg?])
+    }
+
+    /// The fields in [`CSV_HEADER`]'s order.
+    fn csv_fields(&self) -> Vec<String> {
+        let num = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
+        vec![
+            csv_text(&self.scene),
+            csv_text(&self.family),
+            csv_text(&self.variant),
+            self.threads.to_string(),
+            num(self.mirror_deg),
+            num(self.shiny_deg),
+            num(self.diffuse_deg),
+            num(self.mirror_si_rmse),
+            num(self.shiny_si_rmse),
+            num(self.diffuse_si_rmse),
+            num(self.rotation_deg),
+            num(self.axis_deg),
+            num(self.translation_mm),
+            self.pose_found.map(|f| f.to_string()).unwrap_or_default(),
+            format!("{}", self.wall_s),
+            num(self.peak_mb),
+            csv_text(self.error.as_deref().unwrap_or("")),
+        ]
+    }
+}
+
+/// The columns of `results.csv`, [`Row`]'s fields.
+pub const CSV_HEADER: &str = "scene,family,variant,threads,mirror_deg,shiny_deg,diffuse_deg,mirror_si_rmse,\
+shiny_si_rmse,diffuse_si_rmse,rotation_deg,axis_deg,translation_mm,pose_found,wall_s,peak_mb,error";
+
+/// A CSV field: quoted when it holds a comma, quote or line break.
+pub fn csv_text(s: &str) -> String {
+    match s.contains([',', '"', '\n', '\r']) {
+        true => format!("\"{}\"", s.replace('"', "\"\"")),
+        false => s.to_string(),
+    }
+}
+
+/// `results.jsonl` of a study's output folder: the rows so far.
+pub struct Results {
+    path: PathBuf,
+    /// Every row, in the order run.
+    pub rows: Vec<Row>,
+    done: BTreeSet<(String, String)>,
+}
+
+impl Results {
+    /// Opens (or starts) `dir/results.jsonl`. A last line cut short (a run
+    /// killed while writing it) is dropped with a warning and redone; any
+    /// other line that is not a row is an error naming the file and line.
+    pub fn open(dir: &Path) -> Result<Self> {
+        std::fs::create_dir_all(dir).map_err(|e| RenderError::io(dir, "create folder", e))?;
+        let path = dir.join("results.jsonl");
+        let mut rows = Vec::new();
+        if path.is_file() {
+            let text = std::fs::read_to_string(&path).map_err(|e| RenderError::io(&path, "read", e))?;
+            let lines: Vec<&str> = text.lines().collect();
+            for (i, line) in lines.iter().enumerate() {
+                if line.trim().is_empty() {
+                    continue;
+                }
+                match serde_json::from_str::<Row>(line) {
+                    Ok(row) => rows.push(row),
+                    Err(_) if i + 1 == lines.len() && !text.ends_with('\n') => {
+                        eprintln!(
+                            "alp: warning: {}: line {} was cut short; that run is redone",
+                            path.display(),
+                            i + 1
+                        );
+                        // The whole lines kept as they were: the cut one must not prefix the next row.
+                        let whole = text.rfind('\n').map_or(0, |end| end + 1);
+                        write_atomically(&path, &text[..whole])?;
+                    }
+                    Err(e) => {
+                        return Err(RenderError::file(&path, format!("line {} is not a study row: {e}", i + 1)).into());
+                    }
+                }
+            }
+        }
+        let done = rows.iter().map(|r| (r.scene.clone(), r.variant.clone())).collect();
+        Ok(Results { path, rows, done })
+    }
+
+    /// Whether `scene` has run under `variant`.
+    pub fn has(&self, scene: &str, variant: &str) -> bool {
+        self.done.contains(&(scene.to_string(), variant.to_string()))
+    }
+
+    /// Appends a finished run (one whole line, flushed).
+    pub fn push(&mut self, row: Row) -> Result<()> {
+        let line = serde_json::to_string(&row).map_err(|e| RenderError::io(&self.path, "serialise", e))? + "\n";
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.path)
+            .map_err(|e| RenderError::io(&self.path, "open for appending", e))?;
+        file.write_all(line.as_bytes())
+            .and_then(|_| file.flush())
+            .map_err(|e| RenderError::io(&self.path, "append", e))?;
+        self.done.insert((row.scene.clone(), row.variant.clone()));
+        self.rows.push(row);
+        Ok(())
+    }
+
+    /// Writes `results.csv` beside `results.jsonl`.
+    pub fn write_csv(&self) -> Result<()> {
+        let mut text = String::from(CSV_HEADER) + "\n";
+        for row in &self.rows {
+            text += &row.csv_fields().join(",");
+            text.push('\n');
+        }
+        write_atomically(&self.path.with_file_name("results.csv"), &text)
+    }
+}
+
+/// Writes `text` to `path` whole or not at all (a temporary sibling renamed into place).
+pub fn write_atomically(path: &Path, text: &str) -> Result<()> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = path.with_file_name(format!(".{name}.partial-{}", std::process::id()));
+    std::fs::write(&tmp, text).map_err(|e| RenderError::io(&tmp, "write", e))?;
+    std::fs::rename(&tmp, path).map_err(|e| RenderError::io(path, "move into place", e).into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(scene: &str, variant: &str) -> Row {
+        Row {
+            scene: scene.into(),
+            family: "quality".into(),
+            variant: variant.into(),
+            threads: 2,
+            mirror_deg: Some(4.5),
+            shiny_deg: Some(1.25),
+            diffuse_deg: None,
+            mirror_si_rmse: Some(0.5),
+            shiny_si_rmse: Some(0.25),
+            diffuse_si_rmse: None,
+            rotation_deg: Some(1.0),
+            axis_deg: Some(0.5),
+            translation_mm: Some(2.0),
+            pose_found: Some(true),
+            wall_s: 3.5,
+            peak_mb: None,
+            error: Some("a \"quoted\", error".into()),
+        }
+    }
+
+    #[test]
+    fn rows_survive_a_reopen_and_a_cut_short_line_is_redone() {
+        let dir = std::env::temp_dir().join(format!("alp-study-record-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut results = Results::open(&dir).expect("open");
+        results.push(row("a", "quality=fast")).expect("push");
+        results.push(row("b", "quality=fast")).expect("push");
+        // A run killed while writing its line.
+        let mut file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(dir.join("results.jsonl"))
+            .expect("append");
+        file.write_all(br#"{"scene":"c","fam"#).expect("write");
+        drop(file);
+        let whole = std::fs::read_to_string(dir.join("results.jsonl")).expect("read");
+        let reopened = Results::open(&dir).expect("reopen");
+        assert_eq!(reopened.rows, vec![row("a", "quality=fast"), row("b", "quality=fast")]);
+        let kept = std::fs::read_to_string(dir.join("results.jsonl")).expect("read");
+        assert_eq!(
+            kept,
+            whole[..whole.rfind('\n').expect("lines") + 1],
+            "whole lines kept as written"
+        );
+        assert!(reopened.has("b", "quality=fast"));
+        assert!(!reopened.has("c", "quality=fast") && !reopened.has("a", "quality=best"));
+        // A broken line in the middle is an error naming the file and line.
+        std::fs::write(dir.join("results.jsonl"), "{}\n{}\n").expect("write");
+        let err = Results::open(&dir).err().expect("an error").to_string();
+        assert!(err.contains("results.jsonl") && err.contains("line 1"), "{err}");
+        std::fs::remove_dir_all(&dir).expect("clean up");
+    }
+
+    #[test]
+    fn csv_quotes_what_needs_it_and_leaves_missing_numbers_empty() {
+        let fields = row("a", "quality=fast").csv_fields();
+        assert_eq!(fields.len(), CSV_HEADER.split(',').count());
+        assert_eq!(fields[6], "", "no diffuse error");
+        assert_eq!(fields[16], "\"a \"\"quoted\"\", error\"");
+        assert_eq!(csv_text("plain"), "plain");
+    }
+}

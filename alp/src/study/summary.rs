@@ -1,0 +1,213 @@
+//! A study's rows summed up per setting: mean errors, poses found, median
+//! wall time, peak memory, and which settings lie on the Pareto front of
+//! time against error.
+
+use crate::relight::Sphere;
+
+use super::record::{Row, csv_text};
+
+/// One setting over every scene it ran on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VariantSummary {
+    /// The knob family.
+    pub family: String,
+    /// The setting.
+    pub variant: String,
+    /// Runs.
+    pub runs: usize,
+    /// Runs that ended in an error.
+    pub failed: usize,
+    /// Mean angular error per sphere (mirror, shiny, diffuse) over the runs that succeeded.
+    pub angular_deg: [f64; 3],
+    /// Runs whose pose was found, of those that searched for it.
+    pub poses_found: usize,
+    /// Runs that searched for the pose (and did not fail).
+    pub poses_sought: usize,
+    /// Median wall time per image, seconds.
+    pub median_wall_s: f64,
+    /// The largest peak resident memory, MB.
+    pub peak_mb: Option<f64>,
+    /// Per sphere: whether no other setting is both as fast and as accurate
+    /// and better in one of the two.
+    pub pareto: [bool; 3],
+}
+
+/// The summaries of `rows`, one per variant in the order first run.
+pub fn summarize(rows: &[Row]) -> Vec<VariantSummary> {
+    let mut order: Vec<&str> = Vec::new();
+    for row in rows {
+        if !order.contains(&row.variant.as_str()) {
+            order.push(&row.variant);
+        }
+    }
+    let mut summaries: Vec<VariantSummary> = order
+        .iter()
+        .map(|&variant| {
+            let runs: Vec<&Row> = rows.iter().filter(|r| r.variant == variant).collect();
+            let errors: Vec<[f64; 3]> = runs.iter().filter_map(|r| r.angular()).collect();
+            let angular_deg =
+                std::array::from_fn(|k| errors.iter().map(|e| e[k]).sum::<f64>() / errors.len().max(1) as f64);
+            let mut walls: Vec<f64> = runs.iter().map(|r| r.wall_s).collect();
+            walls.sort_by(f64::total_cmp);
+            let median_wall_s = match walls.len() {
+                0 => 0.0,
+                n if n % 2 == 1 => walls[n / 2],
+                n => 0.5 * (walls[n / 2 - 1] + walls[n / 2]),
+            };
+            VariantSummary {
+                family: runs[0].family.clone(),
+                variant: variant.to_string(),
+                runs: runs.len(),
+                failed: runs.len() - errors.len(),
+                angular_deg: if errors.is_empty() { [f64::NAN; 3] } else { angular_deg },
+                poses_found: runs.iter().filter(|r| r.pose_found == Some(true)).count(),
+                poses_sought: runs.iter().filter(|r| r.pose_found.is_some()).count(),
+                median_wall_s,
+                peak_mb: runs.iter().filter_map(|r| r.peak_mb).reduce(f64::max),
+                pareto: [false; 3],
+            }
+        })
+        .collect();
+    for k in 0..3 {
+        let points: Vec<(f64, f64)> = summaries.iter().map(|s| (s.median_wall_s, s.angular_deg[k])).collect();
+        for (s, &(t, e)) in summaries.iter_mut().zip(&points) {
+            s.pareto[k] = e.is_finite()
+                && !points
+                    .iter()
+                    .any(|&(t2, e2)| e2.is_finite() && t2 <= t && e2 <= e && (t2 < t || e2 < e));
+        }
+    }
+    summaries
+}
+
+/// The summaries as CSV.
+pub fn to_csv(summaries: &[VariantSummary]) -> String {
+    let mut text = String::from(
+        "family,variant,runs,failed,mirror_deg,shiny_deg,diffuse_deg,poses_found,poses_sought,median_wall_s,peak_mb,\
+         pareto_mirror,pareto_shiny,pareto_diffuse\n",
+    );
+    for s in summaries {
+        let fields = [
+            csv_text(&s.family),
+            csv_text(&s.variant),
+            s.runs.to_string(),
+            s.failed.to_string(),
+            format!("{:.4}", s.angular_deg[0]),
+            format!("{:.4}", s.angular_deg[1]),
+            format!("{:.4}", s.angular_deg[2]),
+            s.poses_found.to_string(),
+            s.poses_sought.to_string(),
+            format!("{:.3}", s.median_wall_s),
+            s.peak_mb.map(|m| format!("{m:.1}")).unwrap_or_default(),
+            s.pareto[0].to_string(),
+            s.pareto[1].to_string(),
+            s.pareto[2].to_string(),
+        ];
+        text += &fields.join(",");
+        text.push('\n');
+    }
+    text
+}
+
+/// The summaries as a Markdown table; `*` marks a point on the front.
+pub fn to_markdown(summaries: &[VariantSummary]) -> String {
+    let names = Sphere::ALL.map(Sphere::name).join(" / ");
+    let mut text = format!(
+        "| family | setting | runs | mean angular error, {names} (deg) | poses found | median wall (s) | peak MB |\n\
+         |---|---|---|---|---|---|---|\n"
+    );
+    for s in summaries {
+        let errors: Vec<String> = (0..3)
+            .map(|k| format!("{:.2}{}", s.angular_deg[k], if s.pareto[k] { "*" } else { "" }))
+            .collect();
+        let failed = match s.failed {
+            0 => String::new(),
+            n => format!(" ({n} failed)"),
+        };
+        text += &format!(
+            "| {} | {} | {}{} | {} | {} / {} | {:.2} | {} |\n",
+            s.family,
+            s.variant,
+            s.runs,
+            failed,
+            errors.join(" / "),
+            s.poses_found,
+            s.poses_sought,
+            s.median_wall_s,
+            s.peak_mb.map(|m| format!("{m:.0}")).unwrap_or_else(|| "-".into()),
+        );
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(variant: &str, wall_s: f64, mirror: f64) -> Row {
+        Row {
+            scene: "s".into(),
+            family: "f".into(),
+            variant: variant.into(),
+            threads: 1,
+            mirror_deg: Some(mirror),
+            shiny_deg: Some(1.0),
+            diffuse_deg: Some(1.0),
+            mirror_si_rmse: None,
+            shiny_si_rmse: None,
+            diffuse_si_rmse: None,
+            rotation_deg: None,
+            axis_deg: None,
+            translation_mm: None,
+            pose_found: Some(mirror < 5.0),
+            wall_s,
+            peak_mb: Some(wall_s * 10.0),
+            error: None,
+        }
+    }
+
+    #[test]
+    fn the_front_holds_what_nothing_beats_in_both_time_and_error() {
+        let rows = [
+            row("fast", 1.0, 6.0),
+            row("slow-and-worse", 5.0, 7.0),
+            row("default", 2.0, 4.0),
+            row("default", 4.0, 4.0),
+            row("best", 8.0, 3.0),
+        ];
+        let s = summarize(&rows);
+        assert_eq!(
+            s.iter().map(|s| s.variant.as_str()).collect::<Vec<_>>(),
+            ["fast", "slow-and-worse", "default", "best"]
+        );
+        assert_eq!(s[2].median_wall_s, 3.0);
+        assert_eq!(s[2].runs, 2);
+        assert_eq!(s[2].peak_mb, Some(40.0));
+        assert_eq!(
+            s.iter().map(|s| s.pareto[0]).collect::<Vec<_>>(),
+            [true, false, true, true]
+        );
+        // Shiny errors tie everywhere: only the fastest is on that front.
+        assert_eq!(
+            s.iter().map(|s| s.pareto[1]).collect::<Vec<_>>(),
+            [true, false, false, false]
+        );
+        let table = to_markdown(&s);
+        assert!(
+            table.contains("| f | default | 2 | 4.00* / 1.00 / 1.00 | 2 / 2 | 3.00 | 40 |"),
+            "{table}"
+        );
+        assert_eq!(to_csv(&s).lines().count(), 5);
+    }
+
+    #[test]
+    fn a_setting_that_always_failed_has_no_errors_and_is_off_the_front() {
+        let mut failed = row("broken", 0.5, 1.0);
+        failed.mirror_deg = None;
+        failed.error = Some("no".into());
+        let s = summarize(&[failed, row("default", 2.0, 4.0)]);
+        assert_eq!(s[0].failed, 1);
+        assert!(s[0].angular_deg[0].is_nan() && !s[0].pareto[0]);
+        assert!(s[1].pareto[0]);
+    }
+}

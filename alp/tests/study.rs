@@ -1,0 +1,152 @@
+//! `alp study speed-accuracy` on two tiny scenes: the files appear, the CSV
+//! parses, the chart is SVG with the expected series, a resumed run skips
+//! finished rows, and bad flags are clear errors.
+
+mod common;
+
+use std::path::Path;
+
+use common::{alp, workspace};
+
+/// Two 128x96 scenes of the can (16 spp) under the map at `env`, in `dir/scenes`.
+fn scenes(dir: &Path, env: &Path) -> std::path::PathBuf {
+    let scenes = dir.join("scenes");
+    for seed in ["1", "2"] {
+        let out = scenes.join(format!("can_{seed}"));
+        let run = alp(&[
+            "synth",
+            "--probe",
+            "can",
+            "--env",
+            env.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+            "--seed",
+            seed,
+            "--spp",
+            "16",
+            "--width",
+            "128",
+            "--height",
+            "96",
+        ]);
+        assert!(run.status.success(), "synth: {}", String::from_utf8_lossy(&run.stderr));
+    }
+    scenes
+}
+
+fn study(scenes: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec![
+        "study",
+        "speed-accuracy",
+        "--scenes",
+        scenes.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+    ];
+    if !extra.contains(&"--eval-spp") {
+        args.extend_from_slice(&["--eval-spp", "4"]);
+    }
+    args.extend_from_slice(extra);
+    alp(&args)
+}
+
+#[test]
+fn a_study_writes_its_tables_and_chart_and_a_rerun_skips_what_it_has() {
+    let (dir, env) = workspace("study", 16);
+    let scenes = scenes(&dir, &env);
+    let out = dir.join("study");
+    // The outside method with a Python that does not exist: skipped, with a note.
+    let run = study(
+        &scenes,
+        &out,
+        &[
+            "--families",
+            "threads,mitsuba",
+            "--mitsuba-python",
+            "/nonexistent/python3",
+        ],
+    );
+    assert!(run.status.success(), "study: {}", String::from_utf8_lossy(&run.stderr));
+    for file in [
+        "results.jsonl",
+        "results.csv",
+        "summary.csv",
+        "summary.md",
+        "speed_accuracy.svg",
+    ] {
+        assert!(out.join(file).is_file(), "no {file}");
+    }
+    let csv = std::fs::read_to_string(out.join("results.csv")).expect("csv");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "two scenes, default and threads=1: {csv}");
+    let column = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    for row in &rows {
+        assert_eq!(row.len(), header.len(), "{row:?}");
+        let mirror: f64 = row[column("mirror_deg")].parse().expect("a mirror error");
+        let wall: f64 = row[column("wall_s")].parse().expect("a wall time");
+        assert!(mirror.is_finite() && mirror >= 0.0 && wall > 0.0, "{row:?}");
+        assert!(["true", "false"].contains(&row[column("pose_found")]));
+        assert_eq!(row[column("error")], "");
+    }
+    let variants: Vec<&str> = rows.iter().map(|r| r[column("variant")]).collect();
+    assert_eq!(variants, ["default", "threads=1", "default", "threads=1"]);
+    let summary = std::fs::read_to_string(out.join("summary.md")).expect("summary");
+    assert!(summary.contains("| threads | threads=1 | 2 |"), "{summary}");
+    assert!(
+        summary.contains("outside method") && summary.contains("skipped"),
+        "{summary}"
+    );
+    let svg = std::fs::read_to_string(out.join("speed_accuracy.svg")).expect("svg");
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    for text in [
+        "mirror sphere",
+        "shiny sphere",
+        "diffuse sphere",
+        "threads",
+        "Pareto front",
+        "default",
+    ] {
+        assert!(svg.contains(text), "no `{text}` in the chart");
+    }
+    // A rerun with one family more runs only its settings.
+    let before = std::fs::read_to_string(out.join("results.jsonl")).expect("jsonl");
+    let run = study(&scenes, &out, &["--families", "threads,lighting"]);
+    assert!(run.status.success(), "rerun: {}", String::from_utf8_lossy(&run.stderr));
+    let after = std::fs::read_to_string(out.join("results.jsonl")).expect("jsonl");
+    assert!(after.starts_with(&before), "the finished rows were redone");
+    let added: Vec<&str> = after[before.len()..].lines().collect();
+    assert_eq!(added.len(), 2, "{added:?}");
+    assert!(added.iter().all(|l| l.contains("\"variant\":\"lighting=adam\"")));
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
+fn bad_study_flags_and_folders_are_clear_errors() {
+    let (dir, env) = workspace("study-bad", 8);
+    let out = dir.join("out");
+    let stderr = |run: std::process::Output| {
+        assert!(!run.status.success());
+        String::from_utf8_lossy(&run.stderr).into_owned()
+    };
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).expect("mkdir");
+    let e = stderr(study(&empty, &out, &[]));
+    assert!(e.contains("empty") && e.contains("no scene folder"), "{e}");
+    let scenes = scenes(&dir, &env);
+    let e = stderr(study(&scenes, &out, &["--families", "colour"]));
+    assert!(e.contains("--families") && e.contains("colour"), "{e}");
+    let e = stderr(study(&scenes, &out, &["--eval-spp", "5"]));
+    assert!(e.contains("--eval-spp") && e.contains("square"), "{e}");
+    // A scene whose probe.txt names nothing: the file is named, nothing is run.
+    std::fs::write(scenes.join("can_2/probe.txt"), "\n").expect("write");
+    let e = stderr(study(&scenes, &out, &["--families", "threads"]));
+    assert!(e.contains("probe.txt") && e.contains("empty"), "{e}");
+    assert!(
+        !out.join("results.jsonl").exists(),
+        "a run started before the scenes were checked"
+    );
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
