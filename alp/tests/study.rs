@@ -150,3 +150,73 @@ fn bad_study_flags_and_folders_are_clear_errors() {
     );
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn the_stability_study_perturbs_grades_and_never_panics_or_goes_non_finite() {
+    let (dir, env) = workspace("study-stability", 16);
+    let scenes = scenes(&dir, &env);
+    let out = dir.join("stability");
+    let run = alp(&[
+        "study",
+        "stability",
+        "--scenes",
+        scenes.join("can_1").to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--eval-spp",
+        "4",
+        "--perturbations",
+        "small,noise,one_start",
+    ]);
+    assert!(run.status.success(), "study: {}", String::from_utf8_lossy(&run.stderr));
+    for file in [
+        "results.jsonl",
+        "results.csv",
+        "stability.csv",
+        "stability.md",
+        "stability.svg",
+    ] {
+        assert!(out.join(file).is_file(), "no {file}");
+    }
+    let rows: Vec<serde_json::Value> = std::fs::read_to_string(out.join("results.jsonl"))
+        .expect("rows")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a JSON row"))
+        .collect();
+    let variants: Vec<&str> = rows.iter().map(|r| r["variant"].as_str().expect("variant")).collect();
+    assert_eq!(
+        variants,
+        [
+            "unperturbed",
+            "small=120",
+            "small=80",
+            "small=40",
+            "noise=0.01",
+            "noise=0.03",
+            "noise=0.1",
+            "one_start"
+        ]
+    );
+    // The can is under 40 px tall in the 96 px photo: no strength of `small` makes it smaller.
+    let skipped: Vec<bool> = rows.iter().map(|r| !r["skipped"].is_null()).collect();
+    assert_eq!(
+        skipped,
+        [false, true, true, true, false, false, false, false],
+        "{rows:?}"
+    );
+    for r in rows.iter().filter(|r| r["skipped"].is_null()) {
+        assert_eq!(r["non_finite"], false, "{r}");
+        assert!(r["error"].is_null(), "{r}");
+        assert!(r["mirror_deg"].as_f64().is_some_and(f64::is_finite), "{r}");
+    }
+    assert_eq!(rows[6]["level"], 3);
+    let table = std::fs::read_to_string(out.join("stability.md")).expect("table");
+    assert!(table.contains("| small | small=40 | 0 | 0 / 0 |"), "{table}");
+    assert!(
+        table.contains("| noise | noise=0.1 | 1 |") && table.contains("| one_start | one_start | 1 |"),
+        "{table}"
+    );
+    let svg = std::fs::read_to_string(out.join("stability.svg")).expect("svg");
+    assert!(svg.starts_with("<svg") && svg.contains("one_start") && svg.contains("noise"));
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}

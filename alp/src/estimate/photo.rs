@@ -10,6 +10,7 @@ use super::settings::PhotoSettings;
 use crate::error::{Error, Result};
 
 /// The photo and what is known about it.
+#[derive(Clone)]
 pub struct Photo {
     /// Linear HDR RGB.
     pub image: RgbImage,

@@ -314,6 +314,12 @@ impl Objective {
             .term(LightSmoothness::new(2.0).weight(1e-2))
     }
 
+    /// The objective less the terms named `names` (an ablation).
+    pub fn without(mut self, names: &[&str]) -> Self {
+        self.terms.retain(|t| !names.contains(&t.term.name()));
+        self
+    }
+
     /// The terms in order.
     pub fn terms(&self) -> &[WeightedTerm] {
         &self.terms

@@ -5,7 +5,7 @@ use plotters::prelude::*;
 use crate::error::{Error, Result};
 use crate::relight::Sphere;
 
-use super::summary::VariantSummary;
+use super::summary::{StabilitySummary, VariantSummary};
 
 /// Chart size, pixels: three panels side by side.
 const SIZE: (u32, u32) = (1500, 520);
@@ -119,6 +119,85 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
     Ok(svg)
 }
 
+/// The median angular error against the perturbation's graded level, a
+/// panel per sphere: one line per perturbation from the photo as it is
+/// (level 0) through its strengths (an ablation: one step).
+pub fn stability_svg(summaries: &[StabilitySummary]) -> Result<String> {
+    let base = summaries.iter().find(|s| s.level == 0);
+    let mut families: Vec<&str> = Vec::new();
+    for s in summaries.iter().filter(|s| s.level > 0) {
+        if !families.contains(&s.family.as_str()) {
+            families.push(&s.family);
+        }
+    }
+    let top_level = summaries.iter().map(|s| s.level).max().unwrap_or(1).max(1);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(drawing)?;
+        for (k, panel) in root.split_evenly((1, 3)).iter().enumerate() {
+            let e_hi = summaries
+                .iter()
+                .map(|s| s.median_deg[k])
+                .filter(|e| e.is_finite())
+                .fold(0.0f64, f64::max)
+                .max(1e-3)
+                * 1.15;
+            let mut chart = ChartBuilder::on(panel)
+                .caption(format!("{} sphere", Sphere::ALL[k].name()), ("sans-serif", 20))
+                .margin(12)
+                .x_label_area_size(45)
+                .y_label_area_size(55)
+                .build_cartesian_2d(-0.2..top_level as f64 + 0.2, 0.0..e_hi)
+                .map_err(drawing)?;
+            chart
+                .configure_mesh()
+                .x_labels(top_level + 1)
+                .x_label_formatter(&|x| match x.round() as usize {
+                    0 => "none".into(),
+                    l => format!("{l}"),
+                })
+                .x_desc("strength (graded level)")
+                .y_desc("median angular error (deg)")
+                .draw()
+                .map_err(drawing)?;
+            for (i, family) in families.iter().enumerate() {
+                let colour = PALETTE[i % PALETTE.len()];
+                let dash = i >= PALETTE.len();
+                let mut points: Vec<(f64, f64)> = base
+                    .into_iter()
+                    .chain(summaries.iter().filter(|s| s.family == *family))
+                    .filter(|s| s.median_deg[k].is_finite())
+                    .map(|s| (s.level as f64, s.median_deg[k]))
+                    .collect();
+                points.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let style = colour.stroke_width(2);
+                let series = match dash {
+                    false => chart.draw_series(LineSeries::new(points.clone(), style)),
+                    true => chart.draw_series(DashedLineSeries::new(points.clone(), 6, 4, style)),
+                };
+                series
+                    .map_err(drawing)?
+                    .label(*family)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+                    .map_err(drawing)?;
+            }
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperLeft)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 11))
+                .draw()
+                .map_err(drawing)?;
+        }
+        root.present().map_err(drawing)?;
+    }
+    Ok(svg)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -136,6 +215,46 @@ mod tests {
             peak_mb: None,
             pareto: [pareto; 3],
         }
+    }
+
+    #[test]
+    fn the_stability_chart_has_a_line_per_perturbation_from_the_photo_as_it_is() {
+        let summary = |family: &str, level: usize, median: f64| StabilitySummary {
+            family: family.into(),
+            variant: format!("{family}={level}"),
+            level,
+            strength: level as f64,
+            runs: 2,
+            skipped: 0,
+            failed: 0,
+            warned: 0,
+            non_finite: 0,
+            poses_found: 2,
+            poses_sought: 2,
+            median_deg: [median; 3],
+            p90_deg: [median * 2.0; 3],
+        };
+        let s = [
+            summary("unperturbed", 0, 3.0),
+            summary("noise", 1, 3.5),
+            summary("noise", 2, 4.0),
+            summary("noise", 3, 6.0),
+            summary("one_start", 1, 5.0),
+        ];
+        let svg = stability_svg(&s).expect("a chart");
+        for text in ["noise", "one_start", "strength (graded level)", "none"] {
+            assert!(svg.contains(text), "no `{text}`");
+        }
+        let stroke = |c: RGBColor| format!("stroke=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        let lines = |c: RGBColor, points: usize| {
+            svg.lines()
+                .filter(|l| l.starts_with("<polyline") && l.contains(&stroke(c)))
+                .filter_map(|l| l.split("points=\"").nth(1)?.split('"').next())
+                .filter(|p| p.split_whitespace().count() == points)
+                .count()
+        };
+        assert_eq!(lines(PALETTE[0], 4), 3, "noise: none and three levels, in each panel");
+        assert_eq!(lines(PALETTE[1], 3), 0);
     }
 
     #[test]

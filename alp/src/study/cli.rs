@@ -1,14 +1,14 @@
 //! `alp study ...`: the study commands, from flags to an output folder.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::estimate::cli::progress_bar;
 use crate::relight::RelightSettings;
 
-use super::record::write_atomically;
-use super::{DEFAULT, Method, RunContext, chart, mitsuba_available, speed_accuracy, summary};
+use super::record::{Results, write_atomically};
+use super::{DEFAULT, Method, RunContext, chart, mitsuba_available, speed_accuracy, stability, summary};
 
 /// The studies.
 #[derive(clap::Subcommand, Debug)]
@@ -18,6 +18,36 @@ pub enum StudyCommand {
     /// orientation starts, the working map's resolution, the lighting
     /// solve, threads), swept one at a time from the default.
     SpeedAccuracy(SpeedAccuracyArgs),
+    /// Where the estimate breaks: the photo perturbed (masks eroded or
+    /// dilated, noise, clipped highlights, a wrong exposure, the probe cut
+    /// by the border, small probes, blur) at graded strengths, and the
+    /// paper's ablations (one start, no pose priors, no light smoothness,
+    /// joint rounds).
+    Stability(StabilityArgs),
+}
+
+/// Flags of `alp study stability`.
+#[derive(clap::Args, Debug)]
+pub struct StabilityArgs {
+    /// Scene folders, or folders of scene folders (FORMATS.md, "Scene folder").
+    #[arg(long, num_args = 1.., required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// Output folder: results.jsonl (kept: a rerun skips the runs it holds),
+    /// results.csv, stability.csv, stability.md, stability.svg.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Worker threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// The perturbations and ablations to run, comma-separated (default:
+    /// all of mask_erode, mask_dilate, noise, clip, exposure_under,
+    /// exposure_over, border, small, blur, one_start, no_pose_priors,
+    /// no_light_smoothness, joint_rounds).
+    #[arg(long, value_delimiter = ',')]
+    pub perturbations: Option<Vec<String>>,
+    /// Samples per pixel of the relit spheres that score each run, a square.
+    #[arg(long, default_value_t = 256)]
+    pub eval_spp: u32,
 }
 
 /// Flags of `alp study speed-accuracy`.
@@ -51,22 +81,78 @@ pub struct SpeedAccuracyArgs {
 pub fn run(command: &StudyCommand) -> Result<()> {
     match command {
         StudyCommand::SpeedAccuracy(args) => speed_accuracy_run(args),
+        StudyCommand::Stability(args) => stability_run(args),
     }
 }
 
-fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
-    if args.threads == 0 {
+/// The relit spheres' settings for `--eval-spp` (a square), after `--threads` is checked.
+fn checked(threads: usize, eval_spp: u32) -> Result<RelightSettings> {
+    if threads == 0 {
         return Err(Error::invalid("--threads", "needs at least one thread"));
     }
+    let strata = (eval_spp as f64).sqrt().round() as u32;
+    if eval_spp == 0 || strata * strata != eval_spp {
+        return Err(Error::invalid(
+            "--eval-spp",
+            format!("{eval_spp} is not a square (1, 4, 9, ...)"),
+        ));
+    }
+    Ok(RelightSettings { spp: eval_spp, seed: 0 })
+}
+
+/// Every scene under `dirs` under every variant, with a progress bar on a
+/// terminal; `results.csv` written.
+fn run_all(dirs: &[PathBuf], variants: &[super::Variant], out: &Path, context: &RunContext) -> Result<Results> {
+    let scenes = super::scenes::find(dirs)?;
+    let bar = progress_bar(
+        std::io::stderr().is_terminal(),
+        "alp study {bar:30} {pos}/{len} runs, {elapsed} (eta {eta}) {msg}",
+    );
+    let results = super::run(&scenes, variants, out, context, &mut |done, total, what| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+        bar.set_message(what.to_string());
+    });
+    bar.finish_and_clear();
+    let results = results?;
+    results.write_csv()?;
+    Ok(results)
+}
+
+fn stability_run(args: &StabilityArgs) -> Result<()> {
+    let eval = checked(args.threads, args.eval_spp)?;
+    let names = args
+        .perturbations
+        .clone()
+        .unwrap_or_else(|| stability::PERTURBATIONS.map(String::from).to_vec());
+    let variants = stability::sweep(&names, args.threads)?;
+    let context = RunContext {
+        eval,
+        mitsuba_python: None,
+    };
+    let results = run_all(&args.scenes, &variants, &args.out, &context)?;
+    let summaries = summary::summarize_stability(&results.rows);
+    write_atomically(&args.out.join("stability.csv"), &summary::stability_csv(&summaries))?;
+    let table = summary::stability_markdown(&summaries);
+    write_atomically(&args.out.join("stability.md"), &table)?;
+    write_atomically(&args.out.join("stability.svg"), &chart::stability_svg(&summaries)?)?;
+    println!("{table}");
+    eprintln!(
+        "alp study: {} runs in {}; the chart is {}",
+        results.rows.len(),
+        args.out.display(),
+        args.out.join("stability.svg").display()
+    );
+    Ok(())
+}
+
+fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
+    let eval = checked(args.threads, args.eval_spp)?;
     let families = args
         .families
         .clone()
         .unwrap_or_else(|| speed_accuracy::FAMILIES.map(String::from).to_vec());
     let mut variants = speed_accuracy::sweep(&families, args.threads)?;
-    let eval = RelightSettings {
-        spp: args.eval_spp,
-        seed: 0,
-    };
     let mut notes = Vec::new();
     let wants_mitsuba = variants.iter().any(|v| matches!(v.method, Method::MitsubaAdam { .. }));
     let mitsuba_python = match wants_mitsuba.then(|| mitsuba_available(&args.mitsuba_python)) {
@@ -84,26 +170,7 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         None => None,
     };
     let context = RunContext { eval, mitsuba_python };
-    let strata = (args.eval_spp as f64).sqrt().round() as u32;
-    if args.eval_spp == 0 || strata * strata != args.eval_spp {
-        return Err(Error::invalid(
-            "--eval-spp",
-            format!("{} is not a square (1, 4, 9, ...)", args.eval_spp),
-        ));
-    }
-    let scenes = super::scenes::find(&args.scenes)?;
-    let bar = progress_bar(
-        std::io::stderr().is_terminal(),
-        "alp study {bar:30} {pos}/{len} runs, {elapsed} (eta {eta}) {msg}",
-    );
-    let results = super::run(&scenes, &variants, &args.out, &context, &mut |done, total, what| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-        bar.set_message(what.to_string());
-    });
-    bar.finish_and_clear();
-    let results = results?;
-    results.write_csv()?;
+    let results = run_all(&args.scenes, &variants, &args.out, &context)?;
     let summaries = summary::summarize(&results.rows);
     write_atomically(&args.out.join("summary.csv"), &summary::to_csv(&summaries))?;
     let mut table = summary::to_markdown(&summaries);

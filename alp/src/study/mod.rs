@@ -7,12 +7,16 @@
 //! SVG chart.
 //!
 //! - [`speed_accuracy`]: the knobs that trade time for accuracy.
+//! - [`stability`]: what breaks methods ([`perturb`]), at graded strengths,
+//!   and the paper's ablations.
 
 pub mod chart;
 pub mod cli;
+pub mod perturb;
 pub mod record;
 pub mod scenes;
 pub mod speed_accuracy;
+pub mod stability;
 pub mod summary;
 
 use std::path::{Path, PathBuf};
@@ -24,7 +28,7 @@ use render::pose::Pose;
 
 use crate::error::{Error, Result};
 use crate::estimate::report::{peak_resident_mb, reset_peak_resident};
-use crate::estimate::{Settings, estimate};
+use crate::estimate::{Photo, Settings, estimate};
 use crate::eval::{compare_spheres, pose_errors};
 use crate::relight::{RelightSettings, RelitSpheres, evaluation_region, relight};
 
@@ -33,7 +37,7 @@ use scenes::StudyScene;
 
 /// One setting a study runs on every scene.
 pub struct Variant {
-    /// Its knob family (`default` for the default setting).
+    /// Its knob family, or the perturbation (`default` for the default setting).
     pub family: String,
     /// `knob=value`: the setting in words, and the key a rerun skips by.
     pub id: String,
@@ -41,6 +45,21 @@ pub struct Variant {
     pub threads: usize,
     /// What runs.
     pub method: Method,
+    /// What is done to the photo first, and how hard (none: the photo as it is).
+    pub perturbation: Option<Perturbation>,
+}
+
+/// Changes a photo before the estimate sees it.
+pub type Perturb = Box<dyn Fn(&Photo) -> Result<Photo> + Send + Sync>;
+
+/// A perturbation of the photo at one strength.
+pub struct Perturbation {
+    /// Its graded level, 1 the mildest (0 is the photo as it is).
+    pub level: usize,
+    /// Its strength in its own unit (pixels, a share, a factor).
+    pub strength: f64,
+    /// The change.
+    pub apply: Perturb,
 }
 
 /// Changes the default settings into a variant's, given the scene's true pose.
@@ -76,6 +95,7 @@ impl Variant {
             id,
             threads,
             method: Method::Estimate(Box::new(apply)),
+            perturbation: None,
         }
     }
 
@@ -162,39 +182,25 @@ pub fn run(
     Ok(results)
 }
 
-/// What a run found: the map, and the pose when it searched for one.
+/// What a run found: the map, the pose when it searched for one, and what
+/// it warned of.
 struct Found {
     env: EnvMap,
     pose: Option<Pose>,
+    warning: Option<String>,
 }
 
-/// One run: the method timed, its peak memory, its scores.
+/// One run: the method timed, its peak memory, its scores. A panic is
+/// caught and recorded as the run's error; a perturbation the scene cannot
+/// take is a skipped row.
 fn run_one(scene: &StudyScene, truth: &RelitSpheres, variant: &Variant, context: &RunContext) -> Result<Row> {
-    let pool = crate::estimate::cli::thread_pool(Some(variant.threads))?;
-    reset_peak_resident();
-    let started = Instant::now();
-    let result = match &variant.method {
-        Method::Estimate(apply) => {
-            let mut settings = Settings::default();
-            apply(&mut settings, &scene.pose);
-            pool.install(|| estimate(&scene.photo, &scene.probe, &settings))
-                .map(|e| Found {
-                    env: e.env,
-                    pose: settings.known_pose.is_none().then_some(e.pose),
-                })
-        }
-        Method::MitsubaAdam { iters } => mitsuba_adam(scene, *iters, context),
-    };
-    let wall_s = started.elapsed().as_secs_f64();
-    let peak_mb = match variant.method {
-        Method::Estimate(_) => peak_resident_mb(),
-        Method::MitsubaAdam { .. } => None,
-    };
     let mut row = Row {
         scene: scene.name.clone(),
         family: variant.family.clone(),
         variant: variant.id.clone(),
         threads: variant.threads,
+        level: variant.perturbation.as_ref().map(|p| p.level),
+        strength: variant.perturbation.as_ref().map(|p| p.strength),
         mirror_deg: None,
         shiny_deg: None,
         diffuse_deg: None,
@@ -205,12 +211,66 @@ fn run_one(scene: &StudyScene, truth: &RelitSpheres, variant: &Variant, context:
         axis_deg: None,
         translation_mm: None,
         pose_found: None,
-        wall_s,
-        peak_mb,
+        wall_s: 0.0,
+        peak_mb: None,
+        warning: None,
+        non_finite: false,
         error: None,
+        skipped: None,
+    };
+    let perturbed;
+    let photo = match &variant.perturbation {
+        Some(p) => match (p.apply)(&scene.photo) {
+            Ok(photo) => {
+                perturbed = photo;
+                &perturbed
+            }
+            Err(e) => {
+                row.skipped = Some(e.to_string());
+                return Ok(row);
+            }
+        },
+        None => &scene.photo,
+    };
+    let pool = crate::estimate::cli::thread_pool(Some(variant.threads))?;
+    reset_peak_resident();
+    let started = Instant::now();
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match &variant.method {
+        Method::Estimate(apply) => {
+            let mut settings = Settings::default();
+            apply(&mut settings, &scene.pose);
+            pool.install(|| estimate(photo, &scene.probe, &settings))
+                .map(|e| Found {
+                    warning: (e.report.mask_on_border_pixels > 0)
+                        .then(|| format!("{} mask pixels on the image's border", e.report.mask_on_border_pixels)),
+                    env: e.env,
+                    pose: settings.known_pose.is_none().then_some(e.pose),
+                })
+        }
+        Method::MitsubaAdam { iters } => mitsuba_adam(scene, *iters, context),
+    }));
+    row.wall_s = started.elapsed().as_secs_f64();
+    row.peak_mb = match variant.method {
+        Method::Estimate(_) => peak_resident_mb(),
+        Method::MitsubaAdam { .. } => None,
+    };
+    let result = match result {
+        Ok(result) => result,
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            row.error = Some(format!("panicked: {what}"));
+            return Ok(row);
+        }
     };
     match result {
         Ok(found) => {
+            row.warning = found.warning;
+            row.non_finite = found.env.radiance().iter().flatten().any(|v| !v.is_finite())
+                || found.pose.is_some_and(|p| !p.to_world().is_finite());
             let relit = pool.install(|| relight(&found.env, &scene.photo.camera, &context.eval))?;
             let [m, s, d] = compare_spheres(&relit, truth, &evaluation_region());
             row.mirror_deg = Some(m.angular_deg);
@@ -265,5 +325,9 @@ fn mitsuba_adam(scene: &StudyScene, iters: usize, context: &RunContext) -> Resul
     }
     let env = EnvMap::read(&env_path)?;
     let _ = std::fs::remove_dir_all(&dir);
-    Ok(Found { env, pose: None })
+    Ok(Found {
+        env,
+        pose: None,
+        warning: None,
+    })
 }

@@ -21,6 +21,10 @@ pub struct Row {
     pub variant: String,
     /// Worker threads.
     pub threads: usize,
+    /// The perturbation's graded level (1 the mildest; none without one).
+    pub level: Option<usize>,
+    /// The perturbation's strength in its own unit.
+    pub strength: Option<f64>,
     /// Mean angular error of the relit mirror sphere, degrees (none when the run failed).
     pub mirror_deg: Option<f64>,
     /// ... of the shiny sphere.
@@ -46,8 +50,15 @@ pub struct Row {
     pub wall_s: f64,
     /// The process's peak resident memory during the estimate, MB (where the system tells it).
     pub peak_mb: Option<f64>,
-    /// Why the run failed (a clear error of the estimate), if it did.
+    /// What the estimate warned of (a mask on the image's border).
+    pub warning: Option<String>,
+    /// Whether the map or the pose held a value that is not finite.
+    pub non_finite: bool,
+    /// Why the run failed (a clear error of the estimate, or a panic), if it did.
     pub error: Option<String>,
+    /// Why the run did not happen: a perturbation this scene cannot take
+    /// (the probe too small to make smaller, a border cut no crop makes).
+    pub skipped: Option<String>,
 }
 
 impl Row {
@@ -64,6 +75,8 @@ impl Row {
             csv_text(&self.family),
             csv_text(&self.variant),
             self.threads.to_string(),
+            self.level.map(|l| l.to_string()).unwrap_or_default(),
+            num(self.strength),
             num(self.mirror_deg),
             num(self.shiny_deg),
             num(self.diffuse_deg),
@@ -76,14 +89,18 @@ impl Row {
             self.pose_found.map(|f| f.to_string()).unwrap_or_default(),
             format!("{}", self.wall_s),
             num(self.peak_mb),
+            csv_text(self.warning.as_deref().unwrap_or("")),
+            self.non_finite.to_string(),
             csv_text(self.error.as_deref().unwrap_or("")),
+            csv_text(self.skipped.as_deref().unwrap_or("")),
         ]
     }
 }
 
 /// The columns of `results.csv`, [`Row`]'s fields.
-pub const CSV_HEADER: &str = "scene,family,variant,threads,mirror_deg,shiny_deg,diffuse_deg,mirror_si_rmse,\
-shiny_si_rmse,diffuse_si_rmse,rotation_deg,axis_deg,translation_mm,pose_found,wall_s,peak_mb,error";
+pub const CSV_HEADER: &str = "scene,family,variant,threads,level,strength,mirror_deg,shiny_deg,diffuse_deg,\
+mirror_si_rmse,shiny_si_rmse,diffuse_si_rmse,rotation_deg,axis_deg,translation_mm,pose_found,wall_s,peak_mb,\
+warning,non_finite,error,skipped";
 
 /// A CSV field: quoted when it holds a comma, quote or line break.
 pub fn csv_text(s: &str) -> String {
@@ -191,6 +208,8 @@ mod tests {
             family: "quality".into(),
             variant: variant.into(),
             threads: 2,
+            level: None,
+            strength: Some(0.5),
             mirror_deg: Some(4.5),
             shiny_deg: Some(1.25),
             diffuse_deg: None,
@@ -203,7 +222,10 @@ mod tests {
             pose_found: Some(true),
             wall_s: 3.5,
             peak_mb: None,
+            warning: None,
+            non_finite: false,
             error: Some("a \"quoted\", error".into()),
+            skipped: None,
         }
     }
 
@@ -243,8 +265,8 @@ mod tests {
     fn csv_quotes_what_needs_it_and_leaves_missing_numbers_empty() {
         let fields = row("a", "quality=fast").csv_fields();
         assert_eq!(fields.len(), CSV_HEADER.split(',').count());
-        assert_eq!(fields[6], "", "no diffuse error");
-        assert_eq!(fields[16], "\"a \"\"quoted\"\", error\"");
+        assert_eq!(fields[8], "", "no diffuse error");
+        assert_eq!(fields[20], "\"a \"\"quoted\"\", error\"");
         assert_eq!(csv_text("plain"), "plain");
     }
 }

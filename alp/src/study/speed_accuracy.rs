@@ -97,6 +97,7 @@ pub fn family(name: &str, threads: usize) -> Result<Vec<Variant>> {
                 id: format!("mitsuba_adam={iters}"),
                 threads,
                 method: Method::MitsubaAdam { iters },
+                perturbation: None,
             })
             .collect(),
         other => {
@@ -138,7 +139,7 @@ mod tests {
                 continue;
             };
             let mut s = Settings::default();
-            apply(&mut s, &Pose::new(glam::Quat::IDENTITY, 1.0, glam::Vec3::ZERO));
+            apply(&mut s, &Pose::IDENTITY);
             let changed =
                 serde_json::to_string(&s).expect("json") != default || v.threads != 2 || s.known_pose.is_some();
             assert!(changed, "{} changes nothing", v.id);

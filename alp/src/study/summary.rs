@@ -140,6 +140,140 @@ pub fn to_markdown(summaries: &[VariantSummary]) -> String {
     text
 }
 
+/// One perturbation at one strength (or an ablation) over every scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StabilitySummary {
+    /// The perturbation.
+    pub family: String,
+    /// The setting.
+    pub variant: String,
+    /// Its graded level (0: the photo as it is).
+    pub level: usize,
+    /// Its strength in its own unit.
+    pub strength: f64,
+    /// Runs that happened.
+    pub runs: usize,
+    /// Scenes that could not take the perturbation.
+    pub skipped: usize,
+    /// Runs that ended in an error (or a panic).
+    pub failed: usize,
+    /// Runs that ended with a warning.
+    pub warned: usize,
+    /// Runs whose map or pose held a value that is not finite.
+    pub non_finite: usize,
+    /// Runs whose pose was found, of those that searched for it.
+    pub poses_found: usize,
+    /// Runs that searched for the pose and did not fail.
+    pub poses_sought: usize,
+    /// Median angular error per sphere (mirror, shiny, diffuse), degrees.
+    pub median_deg: [f64; 3],
+    /// 90th percentile (nearest rank) per sphere, degrees.
+    pub p90_deg: [f64; 3],
+}
+
+/// The `q` quantile of `values` by nearest rank (NaN for none).
+fn quantile(values: &mut [f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    let rank = (q * values.len() as f64).ceil().max(1.0) as usize;
+    values[rank - 1]
+}
+
+/// The stability summaries of `rows`, one per variant in the order first run.
+pub fn summarize_stability(rows: &[Row]) -> Vec<StabilitySummary> {
+    let mut order: Vec<&str> = Vec::new();
+    for row in rows {
+        if !order.contains(&row.variant.as_str()) {
+            order.push(&row.variant);
+        }
+    }
+    order
+        .iter()
+        .map(|&variant| {
+            let all: Vec<&Row> = rows.iter().filter(|r| r.variant == variant).collect();
+            let ran: Vec<&Row> = all.iter().copied().filter(|r| r.skipped.is_none()).collect();
+            let errors: Vec<[f64; 3]> = ran.iter().filter_map(|r| r.angular()).collect();
+            let at =
+                |q: f64| std::array::from_fn(|k| quantile(&mut errors.iter().map(|e| e[k]).collect::<Vec<_>>(), q));
+            StabilitySummary {
+                family: all[0].family.clone(),
+                variant: variant.to_string(),
+                level: all[0].level.unwrap_or(0),
+                strength: all[0].strength.unwrap_or(0.0),
+                runs: ran.len(),
+                skipped: all.len() - ran.len(),
+                failed: ran.iter().filter(|r| r.error.is_some()).count(),
+                warned: ran.iter().filter(|r| r.warning.is_some()).count(),
+                non_finite: ran.iter().filter(|r| r.non_finite).count(),
+                poses_found: ran.iter().filter(|r| r.pose_found == Some(true)).count(),
+                poses_sought: ran.iter().filter(|r| r.pose_found.is_some()).count(),
+                median_deg: at(0.5),
+                p90_deg: at(0.9),
+            }
+        })
+        .collect()
+}
+
+/// The stability summaries as CSV.
+pub fn stability_csv(summaries: &[StabilitySummary]) -> String {
+    let mut text = String::from(
+        "perturbation,variant,level,strength,runs,skipped,failed,warned,non_finite,poses_found,poses_sought,\
+         median_mirror_deg,median_shiny_deg,median_diffuse_deg,p90_mirror_deg,p90_shiny_deg,p90_diffuse_deg\n",
+    );
+    for s in summaries {
+        let mut fields = vec![
+            csv_text(&s.family),
+            csv_text(&s.variant),
+            s.level.to_string(),
+            format!("{}", s.strength),
+            s.runs.to_string(),
+            s.skipped.to_string(),
+            s.failed.to_string(),
+            s.warned.to_string(),
+            s.non_finite.to_string(),
+            s.poses_found.to_string(),
+            s.poses_sought.to_string(),
+        ];
+        fields.extend(s.median_deg.iter().chain(&s.p90_deg).map(|v| format!("{v:.4}")));
+        text += &fields.join(",");
+        text.push('\n');
+    }
+    text
+}
+
+/// The stability summaries as a Markdown table.
+pub fn stability_markdown(summaries: &[StabilitySummary]) -> String {
+    let names = Sphere::ALL.map(Sphere::name).join(" / ");
+    let mut text = format!(
+        "| perturbation | setting | runs | poses found | median angular error, {names} (deg) | 90th percentile (deg) | \
+         errors | warnings | non-finite | skipped |\n|---|---|---|---|---|---|---|---|---|---|\n"
+    );
+    let three = |v: &[f64; 3]| v.iter().map(|x| format!("{x:.2}")).collect::<Vec<_>>().join(" / ");
+    let share = |n: usize, of: usize| match of {
+        0 => "-".to_string(),
+        _ => format!("{n} ({:.0} %)", 100.0 * n as f64 / of as f64),
+    };
+    for s in summaries {
+        text += &format!(
+            "| {} | {} | {} | {} / {} | {} | {} | {} | {} | {} | {} |\n",
+            s.family,
+            s.variant,
+            s.runs,
+            s.poses_found,
+            s.poses_sought,
+            three(&s.median_deg),
+            three(&s.p90_deg),
+            share(s.failed, s.runs),
+            share(s.warned, s.runs),
+            s.non_finite,
+            s.skipped,
+        );
+    }
+    text
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,6 +284,8 @@ mod tests {
             family: "f".into(),
             variant: variant.into(),
             threads: 1,
+            level: None,
+            strength: None,
             mirror_deg: Some(mirror),
             shiny_deg: Some(1.0),
             diffuse_deg: Some(1.0),
@@ -162,7 +298,10 @@ mod tests {
             pose_found: Some(mirror < 5.0),
             wall_s,
             peak_mb: Some(wall_s * 10.0),
+            warning: None,
+            non_finite: false,
             error: None,
+            skipped: None,
         }
     }
 
@@ -198,6 +337,28 @@ mod tests {
             "{table}"
         );
         assert_eq!(to_csv(&s).lines().count(), 5);
+    }
+
+    #[test]
+    fn stability_rows_give_medians_percentiles_and_counts() {
+        let mut rows: Vec<Row> = (0..10).map(|k| row("noise=0.1", 1.0, k as f64)).collect();
+        rows[0].error = Some("no".into());
+        rows[0].mirror_deg = None;
+        rows[1].warning = Some("border".into());
+        rows[2].skipped = Some("too small".into());
+        rows.iter_mut().for_each(|r| {
+            r.family = "noise".into();
+            r.level = Some(3);
+            r.strength = Some(0.1);
+        });
+        let s = &summarize_stability(&rows)[0];
+        assert_eq!((s.runs, s.skipped, s.failed, s.warned, s.level), (9, 1, 1, 1, 3));
+        // Mirror errors 1, 3, 4, ..., 9: median the 4th of 8, 90th percentile the 8th.
+        assert_eq!((s.median_deg[0], s.p90_deg[0]), (5.0, 9.0));
+        assert_eq!((s.poses_found, s.poses_sought), (4, 9));
+        let table = stability_markdown(&summarize_stability(&rows));
+        assert!(table.contains("| noise | noise=0.1 | 9 | 4 / 9 | 5.00 / 1.00 / 1.00 | 9.00 / 1.00 / 1.00 | 1 (11 %) | 1 (11 %) | 0 | 1 |"), "{table}");
+        assert_eq!(stability_csv(&summarize_stability(&rows)).lines().count(), 2);
     }
 
     #[test]
