@@ -8,7 +8,8 @@ inverse lighting does; the paper's own recipe, on another renderer).
 
 The probe is Mitsuba's `principled` metal with our textures (as `mitsuba_scenes.py` renders its
 twins), integrator `prb` (max depth 3: one bounce of inter-reflection), the film cropped to the
-probe. The map, Mitsuba's own `envmap` bitmap (`--env-height` rows + 1, 2:1), starts at the
+probe. The map, Mitsuba's own `envmap` bitmap (2 x `--env-height` + 1 rows, 2 x `--env-height`
+columns: our rows in its convention), starts at the
 photo's mean level and follows Adam on the mean squared error over the mask's pixels, relative
 to the photo's mean level; then it is resampled to our convention (FORMATS.md) at 256x128 and
 written to ENV.exr. Prints one JSON line: {"wall_s", "iters", "loss"}.
@@ -107,10 +108,14 @@ def main():
         loss = dr.sum(weight * dr.square(image[:, :, :3] - reference)) / (level * level)
         dr.backward(loss)
         opt.step()
-        opt[key] = dr.maximum(opt[key], 0.0)
+        # Non-negative, and the bitmap's wrap columns (Mitsuba pads one on
+        # each side, copies of the far ends) kept equal to their twins.
+        data = np.maximum(np.array(opt[key]), 0.0)
+        data[:, 0], data[:, -1] = data[:, -2], data[:, 1]
+        opt[key] = mi.TensorXf(data)
         params.update(opt)
         loss_value = float(loss.array[0]) if hasattr(loss, "array") else float(loss)
-    data = np.array(params[key], dtype=np.float64)[:, :, :3]
+    data = np.array(params[key], dtype=np.float64)[:, 1:-1, :3]
     env = ours_from_mitsuba(data, 128)
     tmp = args.out + ".partial.exr"
     am.write_exr(tmp, env)
