@@ -26,50 +26,46 @@ pub enum StudyCommand {
     Stability(StabilityArgs),
 }
 
-/// Flags of `alp study stability`.
+/// The flags every study has.
 #[derive(clap::Args, Debug)]
-pub struct StabilityArgs {
+pub struct StudyArgs {
     /// Scene folders, or folders of scene folders (FORMATS.md, "Scene folder").
     #[arg(long, num_args = 1.., required = true)]
     pub scenes: Vec<PathBuf>,
     /// Output folder: results.jsonl (kept: a rerun skips the runs it holds),
-    /// results.csv, stability.csv, stability.md, stability.svg.
+    /// results.csv, and the study's tables and chart.
     #[arg(long)]
     pub out: PathBuf,
-    /// Worker threads.
+    /// Worker threads (of the default setting's runs).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// Samples per pixel of the relit spheres that score each run, a square.
+    #[arg(long, default_value_t = 256)]
+    pub eval_spp: u32,
+}
+
+/// Flags of `alp study stability` (tables stability.csv, stability.md; chart stability.svg).
+#[derive(clap::Args, Debug)]
+pub struct StabilityArgs {
+    #[command(flatten)]
+    pub study: StudyArgs,
     /// The perturbations and ablations to run, comma-separated (default:
     /// all of mask_erode, mask_dilate, noise, clip, exposure_under,
     /// exposure_over, border, small, blur, one_start, no_pose_priors,
     /// no_light_smoothness, joint_rounds).
     #[arg(long, value_delimiter = ',')]
     pub perturbations: Option<Vec<String>>,
-    /// Samples per pixel of the relit spheres that score each run, a square.
-    #[arg(long, default_value_t = 256)]
-    pub eval_spp: u32,
 }
 
-/// Flags of `alp study speed-accuracy`.
+/// Flags of `alp study speed-accuracy` (tables summary.csv, summary.md; chart speed_accuracy.svg).
 #[derive(clap::Args, Debug)]
 pub struct SpeedAccuracyArgs {
-    /// Scene folders, or folders of scene folders (FORMATS.md, "Scene folder").
-    #[arg(long, num_args = 1.., required = true)]
-    pub scenes: Vec<PathBuf>,
-    /// Output folder: results.jsonl (kept: a rerun skips the runs it holds),
-    /// results.csv, summary.csv, summary.md, speed_accuracy.svg.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Worker threads of the default setting's runs.
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
+    #[command(flatten)]
+    pub study: StudyArgs,
     /// The knob families to sweep, comma-separated (default: all of quality,
     /// spp, starts, map, lighting, threads, true-pose, mitsuba).
     #[arg(long, value_delimiter = ',')]
     pub families: Option<Vec<String>>,
-    /// Samples per pixel of the relit spheres that score each run, a square.
-    #[arg(long, default_value_t = 256)]
-    pub eval_spp: u32,
     /// The Python that runs the outside method (`tools/mitsuba_lighting.py`,
     /// Mitsuba 3): when it cannot import Mitsuba, the `mitsuba` family is
     /// skipped with a note.
@@ -86,7 +82,7 @@ pub fn run(command: &StudyCommand) -> Result<()> {
 }
 
 /// The relit spheres' settings for `--eval-spp` (a square), after `--threads` is checked.
-fn checked(threads: usize, eval_spp: u32) -> Result<RelightSettings> {
+fn checked(&StudyArgs { threads, eval_spp, .. }: &StudyArgs) -> Result<RelightSettings> {
     if threads == 0 {
         return Err(Error::invalid("--threads", "needs at least one thread"));
     }
@@ -102,13 +98,13 @@ fn checked(threads: usize, eval_spp: u32) -> Result<RelightSettings> {
 
 /// Every scene under `dirs` under every variant, with a progress bar on a
 /// terminal; `results.csv` written.
-fn run_all(dirs: &[PathBuf], variants: &[super::Variant], out: &Path, context: &RunContext) -> Result<Results> {
-    let scenes = super::scenes::find(dirs)?;
+fn run_all(study: &StudyArgs, variants: &[super::Variant], context: &RunContext) -> Result<Results> {
+    let scenes = super::scenes::find(&study.scenes)?;
     let bar = progress_bar(
         std::io::stderr().is_terminal(),
         "alp study {bar:30} {pos}/{len} runs, {elapsed} (eta {eta}) {msg}",
     );
-    let results = super::run(&scenes, variants, out, context, &mut |done, total, what| {
+    let results = super::run(&scenes, variants, &study.out, context, &mut |done, total, what| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
         bar.set_message(what.to_string());
@@ -120,39 +116,41 @@ fn run_all(dirs: &[PathBuf], variants: &[super::Variant], out: &Path, context: &
 }
 
 fn stability_run(args: &StabilityArgs) -> Result<()> {
-    let eval = checked(args.threads, args.eval_spp)?;
+    let (study, out) = (&args.study, &args.study.out);
+    let eval = checked(study)?;
     let names = args
         .perturbations
         .clone()
         .unwrap_or_else(|| stability::PERTURBATIONS.map(String::from).to_vec());
-    let variants = stability::sweep(&names, args.threads)?;
+    let variants = stability::sweep(&names, study.threads)?;
     let context = RunContext {
         eval,
         mitsuba_python: None,
     };
-    let results = run_all(&args.scenes, &variants, &args.out, &context)?;
+    let results = run_all(study, &variants, &context)?;
     let summaries = summary::summarize_stability(&results.rows);
-    write_atomically(&args.out.join("stability.csv"), &summary::stability_csv(&summaries))?;
+    write_atomically(&out.join("stability.csv"), &summary::stability_csv(&summaries))?;
     let table = summary::stability_markdown(&summaries);
-    write_atomically(&args.out.join("stability.md"), &table)?;
-    write_atomically(&args.out.join("stability.svg"), &chart::stability_svg(&summaries)?)?;
-    println!("{table}");
-    eprintln!(
-        "alp study: {} runs in {}; the chart is {}",
-        results.rows.len(),
-        args.out.display(),
-        args.out.join("stability.svg").display()
-    );
+    write_atomically(&out.join("stability.md"), &table)?;
+    write_atomically(&out.join("stability.svg"), &chart::stability_svg(&summaries)?)?;
+    finished(&table, results.rows.len(), &out.join("stability.svg"));
     Ok(())
 }
 
+/// Prints the table and where the chart is.
+fn finished(table: &str, runs: usize, chart: &Path) {
+    println!("{table}");
+    eprintln!("alp study: {runs} runs; the chart is {}", chart.display());
+}
+
 fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
-    let eval = checked(args.threads, args.eval_spp)?;
+    let (study, out) = (&args.study, &args.study.out);
+    let eval = checked(study)?;
     let families = args
         .families
         .clone()
         .unwrap_or_else(|| speed_accuracy::FAMILIES.map(String::from).to_vec());
-    let mut variants = speed_accuracy::sweep(&families, args.threads)?;
+    let mut variants = speed_accuracy::sweep(&families, study.threads)?;
     let mut notes = Vec::new();
     let wants_mitsuba = variants.iter().any(|v| matches!(v.method, Method::MitsubaAdam { .. }));
     let mitsuba_python = match wants_mitsuba.then(|| mitsuba_available(&args.mitsuba_python)) {
@@ -170,24 +168,18 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         None => None,
     };
     let context = RunContext { eval, mitsuba_python };
-    let results = run_all(&args.scenes, &variants, &args.out, &context)?;
+    let results = run_all(study, &variants, &context)?;
     let summaries = summary::summarize(&results.rows);
-    write_atomically(&args.out.join("summary.csv"), &summary::to_csv(&summaries))?;
+    write_atomically(&out.join("summary.csv"), &summary::to_csv(&summaries))?;
     let mut table = summary::to_markdown(&summaries);
     for note in &notes {
         table += &format!("\n{note}\n");
     }
-    write_atomically(&args.out.join("summary.md"), &table)?;
+    write_atomically(&out.join("summary.md"), &table)?;
     write_atomically(
-        &args.out.join("speed_accuracy.svg"),
+        &out.join("speed_accuracy.svg"),
         &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART)?,
     )?;
-    println!("{table}");
-    eprintln!(
-        "alp study: {} runs in {}; the chart is {}",
-        results.rows.len(),
-        args.out.display(),
-        args.out.join("speed_accuracy.svg").display()
-    );
+    finished(&table, results.rows.len(), &out.join("speed_accuracy.svg"));
     Ok(())
 }

@@ -195,28 +195,9 @@ struct Found {
 /// take is a skipped row.
 fn run_one(scene: &StudyScene, truth: &RelitSpheres, variant: &Variant, context: &RunContext) -> Result<Row> {
     let mut row = Row {
-        scene: scene.name.clone(),
-        family: variant.family.clone(),
-        variant: variant.id.clone(),
-        threads: variant.threads,
         level: variant.perturbation.as_ref().map(|p| p.level),
         strength: variant.perturbation.as_ref().map(|p| p.strength),
-        mirror_deg: None,
-        shiny_deg: None,
-        diffuse_deg: None,
-        mirror_si_rmse: None,
-        shiny_si_rmse: None,
-        diffuse_si_rmse: None,
-        rotation_deg: None,
-        axis_deg: None,
-        translation_mm: None,
-        pose_found: None,
-        wall_s: 0.0,
-        peak_mb: None,
-        warning: None,
-        non_finite: false,
-        error: None,
-        skipped: None,
+        ..Row::unscored(&scene.name, &variant.family, &variant.id, variant.threads)
     };
     let perturbed;
     let photo = match &variant.perturbation {

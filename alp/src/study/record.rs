@@ -62,6 +62,34 @@ pub struct Row {
 }
 
 impl Row {
+    /// The row of a run of `variant` on `scene` before it is scored.
+    pub fn unscored(scene: &str, family: &str, variant: &str, threads: usize) -> Self {
+        Row {
+            scene: scene.into(),
+            family: family.into(),
+            variant: variant.into(),
+            threads,
+            level: None,
+            strength: None,
+            mirror_deg: None,
+            shiny_deg: None,
+            diffuse_deg: None,
+            mirror_si_rmse: None,
+            shiny_si_rmse: None,
+            diffuse_si_rmse: None,
+            rotation_deg: None,
+            axis_deg: None,
+            translation_mm: None,
+            pose_found: None,
+            wall_s: 0.0,
+            peak_mb: None,
+            warning: None,
+            non_finite: false,
+            error: None,
+            skipped: None,
+        }
+    }
+
     /// The three angular errors, when the run succeeded.
     pub fn angular(&self) -> Option<[f64; 3]> {
         Some([self.mirror_deg?, self.shiny_deg?, self.diffuse_deg?])
@@ -204,28 +232,18 @@ mod tests {
 
     fn row(scene: &str, variant: &str) -> Row {
         Row {
-            scene: scene.into(),
-            family: "quality".into(),
-            variant: variant.into(),
-            threads: 2,
-            level: None,
             strength: Some(0.5),
             mirror_deg: Some(4.5),
             shiny_deg: Some(1.25),
-            diffuse_deg: None,
             mirror_si_rmse: Some(0.5),
             shiny_si_rmse: Some(0.25),
-            diffuse_si_rmse: None,
             rotation_deg: Some(1.0),
             axis_deg: Some(0.5),
             translation_mm: Some(2.0),
             pose_found: Some(true),
             wall_s: 3.5,
-            peak_mb: None,
-            warning: None,
-            non_finite: false,
             error: Some("a \"quoted\", error".into()),
-            skipped: None,
+            ..Row::unscored(scene, "quality", variant, 2)
         }
     }
 

@@ -280,28 +280,13 @@ mod tests {
 
     fn row(variant: &str, wall_s: f64, mirror: f64) -> Row {
         Row {
-            scene: "s".into(),
-            family: "f".into(),
-            variant: variant.into(),
-            threads: 1,
-            level: None,
-            strength: None,
             mirror_deg: Some(mirror),
             shiny_deg: Some(1.0),
             diffuse_deg: Some(1.0),
-            mirror_si_rmse: None,
-            shiny_si_rmse: None,
-            diffuse_si_rmse: None,
-            rotation_deg: None,
-            axis_deg: None,
-            translation_mm: None,
             pose_found: Some(mirror < 5.0),
             wall_s,
             peak_mb: Some(wall_s * 10.0),
-            warning: None,
-            non_finite: false,
-            error: None,
-            skipped: None,
+            ..Row::unscored("s", "f", variant, 1)
         }
     }
 
