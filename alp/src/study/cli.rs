@@ -169,7 +169,7 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
     };
     let context = RunContext { eval, mitsuba_python };
     let results = run_all(study, &variants, &context)?;
-    let summaries = summary::summarize(&results.rows);
+    let summaries = summary::summarize(&results.rows, &speed_accuracy::APART);
     write_atomically(&out.join("summary.csv"), &summary::to_csv(&summaries))?;
     let mut table = summary::to_markdown(&summaries);
     for note in &notes {

@@ -32,8 +32,10 @@ pub struct VariantSummary {
     pub pareto: [bool; 3],
 }
 
-/// The summaries of `rows`, one per variant in the order first run.
-pub fn summarize(rows: &[Row]) -> Vec<VariantSummary> {
+/// The summaries of `rows`, one per variant in the order first run; the
+/// Pareto front is drawn among the families not in `apart` (those given
+/// what the others search for, the true pose, solve an easier problem).
+pub fn summarize(rows: &[Row], apart: &[&str]) -> Vec<VariantSummary> {
     let mut order: Vec<&str> = Vec::new();
     for row in rows {
         if !order.contains(&row.variant.as_str()) {
@@ -69,7 +71,13 @@ pub fn summarize(rows: &[Row]) -> Vec<VariantSummary> {
         })
         .collect();
     for k in 0..3 {
-        let points: Vec<(f64, f64)> = summaries.iter().map(|s| (s.median_wall_s, s.angular_deg[k])).collect();
+        let points: Vec<(f64, f64)> = summaries
+            .iter()
+            .map(|s| match apart.contains(&s.family.as_str()) {
+                true => (f64::NAN, f64::NAN),
+                false => (s.median_wall_s, s.angular_deg[k]),
+            })
+            .collect();
         for (s, &(t, e)) in summaries.iter_mut().zip(&points) {
             s.pareto[k] = e.is_finite()
                 && !points
@@ -125,18 +133,22 @@ pub fn to_markdown(summaries: &[VariantSummary]) -> String {
             n => format!(" ({n} failed)"),
         };
         text += &format!(
-            "| {} | {} | {}{} | {} | {} / {} | {:.2} | {} |\n",
+            "| {} | {} | {}{} | {} | {} | {:.2} | {} |\n",
             s.family,
             s.variant,
             s.runs,
             failed,
             errors.join(" / "),
-            s.poses_found,
-            s.poses_sought,
+            match s.poses_sought {
+                0 => "- (given)".to_string(),
+                n => format!("{} / {n}", s.poses_found),
+            },
             s.median_wall_s,
             s.peak_mb.map(|m| format!("{m:.0}")).unwrap_or_else(|| "-".into()),
         );
     }
+    text += "\n`*`: on the Pareto front of median wall time against that sphere's mean error, among the \
+             settings that search for the pose.\n";
     text
 }
 
@@ -299,7 +311,7 @@ mod tests {
             row("default", 4.0, 4.0),
             row("best", 8.0, 3.0),
         ];
-        let s = summarize(&rows);
+        let s = summarize(&rows, &[]);
         assert_eq!(
             s.iter().map(|s| s.variant.as_str()).collect::<Vec<_>>(),
             ["fast", "slow-and-worse", "default", "best"]
@@ -316,6 +328,9 @@ mod tests {
             s.iter().map(|s| s.pareto[1]).collect::<Vec<_>>(),
             [true, false, false, false]
         );
+        // A family apart (given the true pose) is never on the front.
+        let apart = summarize(&rows, &["f"]);
+        assert!(apart.iter().all(|s| !s.pareto.contains(&true)));
         let table = to_markdown(&s);
         assert!(
             table.contains("| f | default | 2 | 4.00* / 1.00 / 1.00 | 2 / 2 | 3.00 | 40 |"),
@@ -351,7 +366,7 @@ mod tests {
         let mut failed = row("broken", 0.5, 1.0);
         failed.mirror_deg = None;
         failed.error = Some("no".into());
-        let s = summarize(&[failed, row("default", 2.0, 4.0)]);
+        let s = summarize(&[failed, row("default", 2.0, 4.0)], &[]);
         assert_eq!(s[0].failed, 1);
         assert!(s[0].angular_deg[0].is_nan() && !s[0].pareto[0]);
         assert!(s[1].pareto[0]);
