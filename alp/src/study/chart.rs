@@ -10,8 +10,9 @@ use super::summary::{StabilitySummary, VariantSummary};
 /// Chart size, pixels: three panels side by side.
 const SIZE: (u32, u32) = (1500, 520);
 
-/// The series' colours, in family order.
-const PALETTE: [RGBColor; 8] = [
+/// The series' colours, in family order: one per perturbation of the
+/// stability study, no two alike.
+const PALETTE: [RGBColor; 14] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -20,6 +21,12 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(140, 86, 75),
     RGBColor(227, 119, 194),
     RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(127, 127, 127),
+    RGBColor(0, 0, 128),
+    RGBColor(128, 0, 0),
+    RGBColor(0, 128, 128),
+    RGBColor(255, 215, 0),
 ];
 
 fn drawing(e: impl std::fmt::Display) -> Error {
@@ -163,7 +170,6 @@ pub fn stability_svg(summaries: &[StabilitySummary]) -> Result<String> {
                 .map_err(drawing)?;
             for (i, family) in families.iter().enumerate() {
                 let colour = PALETTE[i % PALETTE.len()];
-                let dash = i >= PALETTE.len();
                 let mut points: Vec<(f64, f64)> = base
                     .into_iter()
                     .chain(summaries.iter().filter(|s| s.family == *family))
@@ -172,11 +178,8 @@ pub fn stability_svg(summaries: &[StabilitySummary]) -> Result<String> {
                     .collect();
                 points.sort_by(|a, b| a.0.total_cmp(&b.0));
                 let style = colour.stroke_width(2);
-                let series = match dash {
-                    false => chart.draw_series(LineSeries::new(points.clone(), style)),
-                    true => chart.draw_series(DashedLineSeries::new(points.clone(), 6, 4, style)),
-                };
-                series
+                chart
+                    .draw_series(LineSeries::new(points.clone(), style))
                     .map_err(drawing)?
                     .label(*family)
                     .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
