@@ -436,7 +436,7 @@ fn apply_sensor(image: &mut RgbImage, noise: f32, exposure_clip: Option<f32>, se
 }
 
 /// A standard normal number (Box-Muller; `1 - u` keeps the logarithm finite).
-fn standard_normal(rng: &mut Rng) -> f32 {
+pub(crate) fn standard_normal(rng: &mut Rng) -> f32 {
     let (u1, u2) = (rng.next_f32(), rng.next_f32());
     (-2.0 * (1.0 - u1).ln()).sqrt() * (2.0 * PI * u2).cos()
 }

@@ -8,6 +8,7 @@ use render::sampling::Rng;
 
 use crate::error::{Error, Result};
 use crate::estimate::Photo;
+use crate::synth::standard_normal;
 
 /// The photo's mask grown (`pixels` > 0) or shrunk (< 0) by a disk of that radius.
 pub fn mask_grown(photo: &Photo, pixels: i32) -> Result<Photo> {
@@ -47,9 +48,7 @@ pub fn noisy(photo: &Photo, sigma: f32, seed: u64) -> Result<Photo> {
     for (p, rgb) in image.pixels.iter_mut().enumerate() {
         let mut rng = Rng::new(seed, p as u64);
         for v in rgb.iter_mut() {
-            let (u1, u2) = (rng.next_f32(), rng.next_f32());
-            let g = (-2.0 * (1.0 - u1).ln()).sqrt() * (std::f32::consts::TAU * u2).cos();
-            *v *= (1.0 + sigma * g).max(0.0);
+            *v *= (1.0 + sigma * standard_normal(&mut rng)).max(0.0);
         }
     }
     Photo::new(image, photo.mask.clone(), photo.camera)
