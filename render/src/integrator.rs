@@ -643,6 +643,11 @@ pub struct LightSampling<'a> {
     /// recesses see where they do not see the sky (a can's lid under its
     /// rim). Without, the model is direct lighting only.
     pub interreflection: bool,
+    /// Whether the probe shadows itself (V above, a shadow ray per light
+    /// sample). Without, every sample sees the map (V = 1): a convex
+    /// probe's model, cheaper, and wrong in a concave one's recesses;
+    /// nothing is then shadowed, so nothing bounces either.
+    pub shadows: bool,
 }
 
 impl<'a> LightSampling<'a> {
@@ -650,13 +655,14 @@ impl<'a> LightSampling<'a> {
     pub const BSDF: Self = LightSampling {
         env: None,
         interreflection: false,
+        shadows: true,
     };
 
     /// A BRDF and an env-map sample per hit by MIS, direct lighting.
     pub fn mis(sampler: &'a EnvSampler) -> Self {
         LightSampling {
             env: Some(sampler),
-            interreflection: false,
+            ..Self::BSDF
         }
     }
 
@@ -664,6 +670,15 @@ impl<'a> LightSampling<'a> {
     pub fn with_interreflection(self) -> Self {
         LightSampling {
             interreflection: true,
+            ..self
+        }
+    }
+
+    /// The same without the probe's shadows on itself (nor its bounce).
+    pub fn without_shadows(self) -> Self {
+        LightSampling {
+            shadows: false,
+            interreflection: false,
             ..self
         }
     }
@@ -730,7 +745,10 @@ pub fn light_samples_with<'t, T: Real>(
     let scale = shading.visibility * s.pixel_share;
     let sample = bsdf.sample(&shading.surface, shading.wo, s.random);
     let wi = shading.to_world(sample.wi);
-    let unshadowed = |w: Vec3Var<'t, T>| tape.constant(&occluder.unshadowed(&hits.point, &values(w)));
+    let unshadowed = |w: Vec3Var<'t, T>| match sampling.shadows {
+        true => tape.constant(&occluder.unshadowed(&hits.point, &values(w))),
+        false => tape.constant(&vec![T::one(); hits.len()]),
+    };
     let lit = unshadowed(wi);
     // The BRDF sample's throughput before its shadow and MIS weight.
     let weight = sample.weight.map(|w| w * scale);

@@ -809,6 +809,11 @@ fn the_probe_lights_itself_by_one_bounce() {
     floor_under_roof_is_lit_as_traced(&LightSampling::BSDF.with_interreflection());
 }
 
+#[test]
+fn without_shadows_every_sample_sees_the_map() {
+    floor_under_roof_is_lit_as_traced(&LightSampling::BSDF.with_interreflection().without_shadows());
+}
+
 /// Renders [`floor_under_roof`] under a map brighter below the horizon
 /// than above, and checks each floor pixel against the rays traced by
 /// hand: a floor sample reflects about +Y and reads the map there, unless
@@ -834,7 +839,7 @@ fn floor_under_roof_is_lit_as_traced(sampling: &LightSampling) {
         }
         let r = Vec3::new(d.x, -d.y, d.z);
         let at_roof = p + r * ((0.5 - p.y) / r.y);
-        let light = match within(at_roof, -1.0..0.0) {
+        let light = match sampling.shadows && within(at_roof, -1.0..0.0) {
             false => Some(r),
             true if sampling.interreflection && !within(at_roof + d * (0.5 / -d.y), -1.0..1.0) => Some(d),
             true => None,
@@ -850,7 +855,7 @@ fn floor_under_roof_is_lit_as_traced(sampling: &LightSampling) {
         }
     }
     assert!(
-        shadowed > 40 && lit > 40 && (bounced > 40) == sampling.interreflection,
+        (shadowed > 40) == sampling.shadows && lit > 40 && (bounced > 40) == sampling.interreflection,
         "the view must show each case: {shadowed} shadowed, {lit} lit, {bounced} bounced samples"
     );
     let mut worst = 0.0f64;

@@ -215,7 +215,7 @@ impl PhotoJudge<'_> {
         let t1 = Instant::now();
         let lighting = &self.settings.lighting;
         let spp = lighting.final_spp(lighting.spp_pilot, self.photo.mask.count(), 1);
-        let sampling = LightSampling::BSDF.with_interreflection();
+        let sampling = lighting.model.sampling(None);
         let fit = self.output_fit(pose, (spp, 78), sampling, Pixels::All, None, lighting.solve_iters)?;
         phases.push(PhaseReport {
             pose: Some(PoseRecord::from(pose)),
@@ -375,7 +375,7 @@ impl PhotoJudge<'_> {
     pub(super) fn score(&self, pose: &Pose, start: &[f64], pixels: Pixels) -> Result<(LightingFit, f64)> {
         let (lighting, work) = (&self.settings.lighting, self.work);
         let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
-        let sampling = LightSampling::mis(&sampler).with_interreflection();
+        let sampling = lighting.model.sampling(Some(&sampler));
         let spp = lighting.final_spp(lighting.spp_lean, self.photo.mask.count(), sampling.strategies());
         let fit = self.output_fit(
             pose,

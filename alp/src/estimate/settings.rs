@@ -4,7 +4,9 @@
 
 use std::sync::Arc;
 
+use render::integrator::LightSampling;
 use render::pose::Pose;
+use render::sampling::EnvSampler;
 use serde::Serialize;
 
 use super::lighting::{LightingMethod, Smoothness};
@@ -214,6 +216,9 @@ pub struct LightingSettings {
     /// least-squares solve, or the paper's many Adam steps (to compare:
     /// `alp estimate --lighting adam`, `alp study speed-accuracy`).
     pub method: LightingMethod,
+    /// What the light transport of the pilot, the lean and the final fits
+    /// models.
+    pub model: LightModel,
     /// Samples per pixel of the pilot map, which guides the later solves'
     /// env-map samples (0: no pilot, BRDF samples alone, no photo searches).
     pub spp_pilot: u32,
@@ -394,6 +399,11 @@ impl Default for Settings {
             },
             lighting: LightingSettings {
                 method: LightingMethod::LeastSquares,
+                model: LightModel {
+                    shadows: true,
+                    interreflection: true,
+                    mis: true,
+                },
                 spp_pilot: 16,
                 spp_lean: 16,
                 spp_final: 128,
@@ -433,6 +443,39 @@ impl Default for Settings {
                 pose_iters: 20,
                 spp: 2,
             },
+        }
+    }
+}
+
+/// The forward model of the lighting fits (PAPER.md's image formation,
+/// `render::integrator`): each part costs time and buys accuracy on some
+/// probes only (`alp study speed-accuracy`, family `model`, per probe family).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct LightModel {
+    /// The probe's shadows on itself, a shadow ray per light sample; off:
+    /// every direction reaches every point, a convex probe's model.
+    pub shadows: bool,
+    /// One bounce of inter-reflection off the probe (with the shadows
+    /// only): a concave probe's recesses see its rim.
+    pub interreflection: bool,
+    /// The lean's and the final fit's light samples drawn by MIS, a BRDF
+    /// and an env-map sample guided by the pilot map; off: BRDF samples
+    /// alone (the paper's estimator), noisier under small bright lights.
+    pub mis: bool,
+}
+
+impl LightModel {
+    /// The light sampling of this model, guided by `guide` (a map's
+    /// sampler) when it draws by MIS.
+    pub fn sampling<'a>(&self, guide: Option<&'a EnvSampler>) -> LightSampling<'a> {
+        let sampling = match (self.mis, guide) {
+            (true, Some(sampler)) => LightSampling::mis(sampler),
+            _ => LightSampling::BSDF,
+        };
+        match (self.shadows, self.interreflection) {
+            (false, _) => sampling.without_shadows(),
+            (true, true) => sampling.with_interreflection(),
+            (true, false) => sampling,
         }
     }
 }
@@ -545,6 +588,28 @@ impl Settings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_light_model_picks_the_sampling_it_names() {
+        let sampler = EnvSampler::new(&render::envmap::EnvMap::new(4, 2, vec![[1.0; 3]; 8]).expect("a map"));
+        let full = Settings::default().lighting.model;
+        let s = full.sampling(Some(&sampler));
+        assert!(
+            s.env.is_some() && s.shadows && s.interreflection,
+            "the default models it all"
+        );
+        assert!(full.sampling(None).env.is_none(), "no guide, no MIS");
+        let s = LightModel { mis: false, ..full }.sampling(Some(&sampler));
+        assert!(s.env.is_none() && s.interreflection);
+        let s = LightModel {
+            interreflection: false,
+            ..full
+        }
+        .sampling(Some(&sampler));
+        assert!(s.env.is_some() && s.shadows && !s.interreflection);
+        let s = LightModel { shadows: false, ..full }.sampling(None);
+        assert!(!s.shadows && !s.interreflection, "nothing shadowed, nothing bounces");
+    }
 
     #[test]
     fn the_presets_trade_time_for_accuracy_and_the_report_records_every_stage() {

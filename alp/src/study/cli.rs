@@ -57,13 +57,14 @@ pub struct StabilityArgs {
     pub perturbations: Option<Vec<String>>,
 }
 
-/// Flags of `alp study speed-accuracy` (tables summary.csv, summary.md; chart speed_accuracy.svg).
+/// Flags of `alp study speed-accuracy` (tables summary.csv, summary.md, and
+/// per probe family model.csv, model.md; chart speed_accuracy.svg).
 #[derive(clap::Args, Debug)]
 pub struct SpeedAccuracyArgs {
     #[command(flatten)]
     pub study: StudyArgs,
     /// The knob families to sweep, comma-separated (default: all of quality,
-    /// spp, starts, map, lighting, threads, true-pose, mitsuba).
+    /// spp, starts, map, model, lighting, threads, true-pose, mitsuba).
     #[arg(long, value_delimiter = ',')]
     pub families: Option<Vec<String>>,
     /// The Python that runs the outside method (`tools/mitsuba_lighting.py`,
@@ -176,6 +177,11 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         table += &format!("\n{note}\n");
     }
     write_atomically(&out.join("summary.md"), &table)?;
+    let groups = summary::by_probe(&results.rows, &speed_accuracy::MODELLING, DEFAULT);
+    if !groups.is_empty() {
+        write_atomically(&out.join("model.csv"), &summary::by_probe_csv(&groups))?;
+        write_atomically(&out.join("model.md"), &summary::by_probe_markdown(&groups))?;
+    }
     write_atomically(
         &out.join("speed_accuracy.svg"),
         &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART)?,

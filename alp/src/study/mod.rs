@@ -197,6 +197,7 @@ fn run_one(scene: &StudyScene, truth: &RelitSpheres, variant: &Variant, context:
     let mut row = Row {
         level: variant.perturbation.as_ref().map(|p| p.level),
         strength: variant.perturbation.as_ref().map(|p| p.strength),
+        probe: scene.probe_family.clone(),
         ..Row::unscored(&scene.name, &variant.family, &variant.id, variant.threads)
     };
     let perturbed;

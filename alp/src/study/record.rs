@@ -15,6 +15,9 @@ use crate::error::Result;
 pub struct Row {
     /// The scene folder's name.
     pub scene: String,
+    /// The probe's family (`scene.json`'s `family`, else the probe's name).
+    #[serde(default)]
+    pub probe: String,
     /// The knob family (`quality`, `spp`, ...; `default` for the default setting).
     pub family: String,
     /// The setting, as `knob=value` (the key a rerun skips by, with the scene).
@@ -66,6 +69,7 @@ impl Row {
     pub fn unscored(scene: &str, family: &str, variant: &str, threads: usize) -> Self {
         Row {
             scene: scene.into(),
+            probe: String::new(),
             family: family.into(),
             variant: variant.into(),
             threads,
@@ -100,6 +104,7 @@ impl Row {
         let num = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
         vec![
             csv_text(&self.scene),
+            csv_text(&self.probe),
             csv_text(&self.family),
             csv_text(&self.variant),
             self.threads.to_string(),
@@ -126,7 +131,7 @@ impl Row {
 }
 
 /// The columns of `results.csv`, [`Row`]'s fields.
-pub const CSV_HEADER: &str = "scene,family,variant,threads,level,strength,mirror_deg,shiny_deg,diffuse_deg,\
+pub const CSV_HEADER: &str = "scene,probe,family,variant,threads,level,strength,mirror_deg,shiny_deg,diffuse_deg,\
 mirror_si_rmse,shiny_si_rmse,diffuse_si_rmse,rotation_deg,axis_deg,translation_mm,pose_found,wall_s,peak_mb,\
 warning,non_finite,error,skipped";
 
@@ -283,8 +288,8 @@ mod tests {
     fn csv_quotes_what_needs_it_and_leaves_missing_numbers_empty() {
         let fields = row("a", "quality=fast").csv_fields();
         assert_eq!(fields.len(), CSV_HEADER.split(',').count());
-        assert_eq!(fields[8], "", "no diffuse error");
-        assert_eq!(fields[20], "\"a \"\"quoted\"\", error\"");
+        assert_eq!(fields[9], "", "no diffuse error");
+        assert_eq!(fields[21], "\"a \"\"quoted\"\", error\"");
         assert_eq!(csv_text("plain"), "plain");
     }
 }

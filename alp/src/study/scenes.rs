@@ -90,10 +90,11 @@ impl Observable {
 }
 
 /// The optional `scene.json` a benchmark generator writes beside a scene:
-/// only `orientation` is read.
-#[derive(Deserialize)]
+/// only `orientation` and the probe's `family` are read.
+#[derive(Default, Deserialize)]
 struct SceneMeta {
     orientation: Option<String>,
+    family: Option<String>,
 }
 
 /// One scene, read.
@@ -106,6 +107,8 @@ pub struct StudyScene {
     pub photo: Photo,
     /// The probe `probe.txt` names.
     pub probe: ProbeAsset,
+    /// The probe's family: `scene.json`'s `family`, else the probe's name.
+    pub probe_family: String,
     /// The true lighting.
     pub env: EnvMap,
     /// The probe's true pose.
@@ -148,24 +151,25 @@ impl StudyScene {
         let env = EnvMap::read(scene_file(dir, "gt_env.exr")?)?;
         let pose = Pose::read(scene_file(dir, "pose.json")?)?;
         let meta_path = dir.join("scene.json");
-        let named = match meta_path.is_file() {
+        let meta = match meta_path.is_file() {
             true => {
                 let text = std::fs::read_to_string(&meta_path).map_err(|e| RenderError::io(&meta_path, "read", e))?;
-                let meta: SceneMeta = serde_json::from_str(&text)
-                    .map_err(|e| RenderError::file(&meta_path, format!("is not a JSON object: {e}")))?;
-                match meta.orientation {
-                    Some(o) => Some(Observable::parse(&o).ok_or_else(|| {
-                        RenderError::field(
-                            &meta_path,
-                            "orientation",
-                            format!("`{o}` is not one of full, axis, line, none"),
-                        )
-                    })?),
-                    None => None,
-                }
+                serde_json::from_str(&text)
+                    .map_err(|e| RenderError::file(&meta_path, format!("is not a JSON object: {e}")))?
             }
-            false => None,
+            false => SceneMeta::default(),
         };
+        let named = match &meta.orientation {
+            Some(o) => Some(Observable::parse(o).ok_or_else(|| {
+                RenderError::field(
+                    &meta_path,
+                    "orientation",
+                    format!("`{o}` is not one of full, axis, line, none"),
+                )
+            })?),
+            None => None,
+        };
+        let probe_family = meta.family.unwrap_or_else(|| probe.name.clone());
         let observable = named.unwrap_or_else(|| match looks_alike_turned(&probe, &Settings::default().symmetry) {
             Some(true) => Observable::Axis,
             _ => Observable::Rotation,
@@ -180,6 +184,7 @@ impl StudyScene {
             dir: dir.to_path_buf(),
             photo,
             probe,
+            probe_family,
             env,
             pose,
             observable,

@@ -3,17 +3,18 @@
 
 use crate::error::{Error, Result};
 use crate::estimate::settings::ADAM_LIGHTING;
-use crate::estimate::settings::yaws;
+use crate::estimate::settings::{LightModel, yaws};
 use crate::estimate::{Quality, Settings};
 
 use super::{Apply, Method, Variant};
 
 /// The knob families, in the order swept and charted.
-pub const FAMILIES: [&str; 8] = [
+pub const FAMILIES: [&str; 9] = [
     "quality",
     "spp",
     "starts",
     "map",
+    "model",
     "lighting",
     "threads",
     "true-pose",
@@ -25,13 +26,19 @@ pub const FAMILIES: [&str; 8] = [
 /// lines do not pass through the default).
 pub const APART: [&str; 2] = ["true-pose", "mitsuba"];
 
+/// The families of modelling choices, tabled per probe family beside the
+/// default (`model.md`): what each buys on which probe.
+pub const MODELLING: [&str; 2] = ["map", "model"];
+
 /// Adam iterations of the outside method's settings.
 pub const MITSUBA_ITERS: [usize; 2] = [200, 1000];
 
 /// The settings of `family` (the default setting not among them): every
 /// quality preset; the searches' and the final solve's samples per pixel
 /// halved and doubled or more; 1 to 12 orientation starts; fixed working
-/// map resolutions against the automatic one; the paper's Adam lighting
+/// map resolutions against the automatic one; the light transport without
+/// one bounce of inter-reflection, without the probe's shadows on itself,
+/// and with BRDF samples alone instead of MIS; the paper's Adam lighting
 /// solve; 1 and 2 threads (the default runs at the study's `threads`); the
 /// lighting alone at the true pose (`true-pose`); and the outside method,
 /// Mitsuba 3 fitting the map by Adam at the true pose (`mitsuba`).
@@ -77,6 +84,19 @@ pub fn family(name: &str, threads: usize) -> Result<Vec<Variant>> {
                 )
             })
             .collect(),
+        "model" => {
+            let without = |id: &str, change: fn(&mut LightModel)| {
+                ours(
+                    format!("model={id}"),
+                    Box::new(move |s, _| change(&mut s.lighting.model)),
+                )
+            };
+            vec![
+                without("no_interreflection", |m| m.interreflection = false),
+                without("no_shadows", |m| m.shadows = false),
+                without("bsdf_only", |m| m.mis = false),
+            ]
+        }
         "lighting" => vec![ours(
             "lighting=adam".into(),
             Box::new(|s, _| s.lighting.method = ADAM_LIGHTING),

@@ -152,6 +152,71 @@ pub fn to_markdown(summaries: &[VariantSummary]) -> String {
     text
 }
 
+/// The settings of `families` and the default, summed up apart per probe
+/// family (each row's `probe`), probe families in the order first run:
+/// what a modelling choice buys on which probe. No front is drawn.
+pub fn by_probe(rows: &[Row], families: &[&str], default: &str) -> Vec<(String, Vec<VariantSummary>)> {
+    let mut probes: Vec<&str> = Vec::new();
+    for row in rows {
+        if !probes.contains(&row.probe.as_str()) {
+            probes.push(&row.probe);
+        }
+    }
+    probes
+        .into_iter()
+        .map(|probe| {
+            let kept: Vec<Row> = (rows.iter())
+                .filter(|r| r.probe == probe && (r.variant == default || families.contains(&r.family.as_str())))
+                .cloned()
+                .collect();
+            let mut summaries = summarize(&kept, families);
+            summaries.iter_mut().for_each(|s| s.pareto = [false; 3]);
+            (probe.to_string(), summaries)
+        })
+        .filter(|(_, summaries)| summaries.iter().any(|s| s.variant != default))
+        .collect()
+}
+
+/// [`by_probe`]'s groups as CSV: [`to_csv`]'s columns after a `probe` column.
+pub fn by_probe_csv(groups: &[(String, Vec<VariantSummary>)]) -> String {
+    let mut text = String::new();
+    for (probe, summaries) in groups {
+        let table = to_csv(summaries);
+        let mut lines = table.lines();
+        let header = lines.next().unwrap_or_default();
+        if text.is_empty() {
+            text = format!("probe,{header}\n");
+        }
+        lines.for_each(|line| text += &format!("{},{line}\n", csv_text(probe)));
+    }
+    text
+}
+
+/// [`by_probe`]'s groups as one Markdown table, a probe family per block.
+pub fn by_probe_markdown(groups: &[(String, Vec<VariantSummary>)]) -> String {
+    let names = Sphere::ALL.map(Sphere::name).join(" / ");
+    let mut text = format!(
+        "| probe | setting | runs | mean angular error, {names} (deg) | poses found | median wall (s) |\n\
+         |---|---|---|---|---|---|\n"
+    );
+    for (probe, summaries) in groups {
+        for s in summaries {
+            text += &format!(
+                "| {probe} | {} | {} | {:.2} / {:.2} / {:.2} | {} / {} | {:.2} |\n",
+                s.variant,
+                s.runs,
+                s.angular_deg[0],
+                s.angular_deg[1],
+                s.angular_deg[2],
+                s.poses_found,
+                s.poses_sought,
+                s.median_wall_s
+            );
+        }
+    }
+    text
+}
+
 /// One perturbation at one strength (or an ablation) over every scene.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StabilitySummary {
@@ -337,6 +402,40 @@ mod tests {
             "{table}"
         );
         assert_eq!(to_csv(&s).lines().count(), 5);
+    }
+
+    #[test]
+    fn modelling_choices_are_tabled_per_probe_family_beside_the_default() {
+        let on = |probe: &str, family: &str, variant: &str, mirror: f64| Row {
+            probe: probe.into(),
+            family: family.into(),
+            ..row(variant, 2.0, mirror)
+        };
+        let rows = [
+            on("can", "default", "default", 3.0),
+            on("can", "model", "model=no_shadows", 9.0),
+            on("can", "quality", "quality=fast", 5.0),
+            on("sphere", "default", "default", 1.0),
+            on("sphere", "model", "model=no_shadows", 1.0),
+            on("sphere", "model", "model=no_shadows", 2.0),
+            on("ring", "default", "default", 4.0),
+        ];
+        let groups = by_probe(&rows, &["model"], "default");
+        // The ring ran no modelling choice: no block of its own.
+        assert_eq!(
+            groups.iter().map(|g| g.0.as_str()).collect::<Vec<_>>(),
+            ["can", "sphere"]
+        );
+        assert_eq!(groups[0].1.len(), 2, "the quality preset is no modelling choice");
+        assert_eq!(groups[1].1[1].angular_deg[0], 1.5);
+        let table = by_probe_markdown(&groups);
+        assert!(
+            table.contains("| can | model=no_shadows | 1 | 9.00 / 1.00 / 1.00 | 0 / 1 | 2.00 |"),
+            "{table}"
+        );
+        let csv = by_probe_csv(&groups);
+        assert!(csv.starts_with("probe,family,variant,"), "{csv}");
+        assert_eq!(csv.lines().count(), 5);
     }
 
     #[test]

@@ -133,9 +133,9 @@ impl MapSizes {
 
 /// The output map's fit at `pose`: at `Settings::spp_final`, with MIS guided
 /// by the `pilot` map (search size) and started from it, with the final
-/// smoothness. The transport follows one bounce of inter-reflection (a
-/// can's lid sees its rim, which reflects the sky). Returns the fit and its
-/// samples per pixel.
+/// smoothness. The transport is `LightingSettings::model`'s (by default one
+/// bounce of inter-reflection: a can's lid sees its rim, which reflects the
+/// sky). Returns the fit and its samples per pixel.
 pub(super) fn final_fit(
     probe: &Probe,
     photo: &Photo,
@@ -150,11 +150,7 @@ pub(super) fn final_fit(
         .map(|texels| env_from_texels(texels, search.0, search.1).map(|map| EnvSampler::new(&map)))
         .transpose()?;
     let start = pilot.map(|texels| resample(texels, search, sizes.work));
-    let sampling = match &sampler {
-        Some(sampler) => LightSampling::mis(sampler),
-        None => LightSampling::BSDF,
-    }
-    .with_interreflection();
+    let sampling = settings.lighting.model.sampling(sampler.as_ref());
     let spp = settings
         .lighting
         .final_spp(settings.lighting.spp_final, photo.mask.count(), sampling.strategies());
