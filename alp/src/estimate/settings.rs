@@ -388,7 +388,7 @@ impl Default for Settings {
                 turn_refit_ratio: 1.2,
                 rival_end_ratio: 2.0,
                 ranking_size: (16, 8),
-                ranking_smoothness: 1.0,
+                ranking_smoothness: 10.0,
                 ranking_spp: 2,
                 rank_tie_deg: 0.02,
                 same_render: 1e-4,
@@ -409,9 +409,9 @@ impl Default for Settings {
                 spp_final: 128,
                 working_height: None,
                 search_height: 64,
-                smoothness: 3e-4,
+                smoothness: 0.003,
                 final_smoothness: Smoothness {
-                    weight: 1e-3,
+                    weight: 0.01,
                     edge: 0.05,
                     chroma: 1.0,
                     edge_evidence: 0.0,
@@ -524,7 +524,7 @@ impl Settings {
                 spp_pilot: 8,
                 spp_lean: 8,
                 spp_final: 8,
-                final_smoothness: Smoothness::quadratic(3e-4),
+                final_smoothness: Smoothness::quadratic(0.003),
                 ..d.lighting
             },
             pose_search: PoseSearchSettings {

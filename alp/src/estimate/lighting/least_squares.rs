@@ -166,7 +166,7 @@ pub(super) const DARK_LEVEL: f64 = 0.05;
 /// than the probe's lobes resolve).
 pub const FLOOR_OF_LEVEL: f64 = 0.02;
 
-/// Solves `min_x>=0 sum_pc w_pc (A x - b)_pc^2 / (sum w / 3) + lambda R(x)` where
+/// Solves `min_x>=0 sum_pc w_pc (A x - b)_pc^2 / sum_pc w_pc b_pc^2 + lambda R(x)` where
 /// `R` penalises squared differences of neighbouring texels (area-weighted,
 /// relative to the local level of the start `x0`, divided by the
 /// target's mean square so that `lambda` is scale-free, and growing only
@@ -190,6 +190,11 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
         .sum::<f64>()
         / weight_sum;
     let lambda = settings.smoothness.weight / mean_sq.max(1e-30) / (w * h) as f64;
+    // The data term over the target's weighted energy: both terms are then
+    // alike in any exposure (over `weight_sum` alone, a photo ten times
+    // brighter would weigh its data a hundred times more against the prior
+    // whenever the weights are relative, 1 / level^2, as the estimate's are).
+    let data_norm = weight_sum * mean_sq.max(1e-30);
     // Differences may count relative to the local radiance level of the
     // start (a bright light's edge is no rougher than a dark wall's texture).
     let level: Vec<f64> = x0
@@ -226,7 +231,7 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
     // The data term's curvature per unknown, and the prior's per texel (at
     // small differences; alike in every channel).
     let column_norms = transport.weighted_column_norms(weight);
-    let data_curvature: Vec<f64> = column_norms.iter().map(|h| 2.0 * h / weight_sum).collect();
+    let data_curvature: Vec<f64> = column_norms.iter().map(|h| 2.0 * h / data_norm).collect();
     let light = clipped_lights(transport, data, &column_norms, settings.clipped_light_share);
     pairs.retain(|p| !light[p.i] && !light[p.j]);
     let pair_curvature = settings.smoothness.channel_curvature();
@@ -266,7 +271,7 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
         g.iter_mut().for_each(|v| *v = 0.0);
         transport.apply_and_pull_back(
             x,
-            |p, px| std::array::from_fn(|c| 2.0 * weight[p][c] * data.residual(p, c, px[c]) / weight_sum),
+            |p, px| std::array::from_fn(|c| 2.0 * weight[p][c] * data.residual(p, c, px[c]) / data_norm),
             &mut rendered,
             g,
             &mut scratch,
@@ -277,7 +282,7 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
                 f += weight[p][c] * data.residual(p, c, rendered[p][c]).powi(2);
             }
         }
-        f /= weight_sum;
+        f /= data_norm;
         f += prior.add_value_and_gradient(x, g);
         g.iter_mut().zip(&scale).for_each(|(g, s)| *g *= s);
         f
@@ -734,6 +739,64 @@ mod tests {
             edged < 0.5 * quadratic,
             "RMS error {edged} with an edge, {quadratic} without"
         );
+    }
+
+    #[test]
+    fn the_solve_is_the_same_at_any_exposure() {
+        // Each pixel reads its texel and half of the next, through a noisy
+        // target weighted relatively (1 / level^2, as the estimate weighs):
+        // a photo and a start 1000 times brighter or darker give the same
+        // map times 1000 or over it, the data and the prior in the same
+        // balance.
+        let (w, h) = (8, 4);
+        let n = w * h;
+        let uv: Vec<Vec2> = (0..2 * n)
+            .map(|k| {
+                let t = (k / 2 + k % 2) % n;
+                Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32)
+            })
+            .collect();
+        let segment: Vec<u32> = (0..2 * n as u32).map(|k| k / 2).collect();
+        let throughputs: Vec<[f32; 3]> = (0..2 * n).map(|k| [1.0 - 0.5 * (k % 2) as f32; 3]).collect();
+        let transport = Transport::new(&segment, &uv, &throughputs, n, w, h);
+        let truth: Vec<f64> = (0..n * 3).map(|i| 0.2 + ((i * 37) % 11) as f64 * 0.4).collect();
+        let mut clean = vec![[0.0; 3]; n];
+        transport.apply(&truth, &mut clean);
+        let settings = LightingSolve {
+            smoothness: Smoothness {
+                weight: 0.3,
+                edge: 0.05,
+                chroma: 2.0,
+                edge_evidence: 0.5,
+            },
+            relative_smoothness: true,
+            floor_of_level: FLOOR_OF_LEVEL,
+            clipped_light_share: 1.0,
+            max_iters: 300,
+            method: LightingMethod::LeastSquares,
+        };
+        let at = |scale: f64| -> Vec<f64> {
+            let target: Vec<[f64; 3]> = (clean.iter().enumerate())
+                .map(|(p, t)| {
+                    std::array::from_fn(|c| scale * t[c] * (1.0 + 0.2 * (((p * 3 + c) * 7) % 5) as f64 / 4.0))
+                })
+                .collect();
+            let weight = target
+                .iter()
+                .map(|t| t.map(|v| 1.0 / (v + 0.05 * scale).powi(2)))
+                .collect();
+            let x0 = vec![scale; n * 3];
+            let env = solve(&transport, &DataTerm::exact(target, weight), settings, &x0)
+                .expect("a solve")
+                .env;
+            env.iter().map(|v| v / scale).collect()
+        };
+        let one = at(1.0);
+        for scale in [1e-3, 1e3] {
+            for (a, b) in at(scale).iter().zip(&one) {
+                assert!((a - b).abs() < 1e-4 * b, "x{scale}: {a} against {b} at 1");
+            }
+        }
     }
 
     #[test]
