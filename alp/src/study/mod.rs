@@ -156,7 +156,14 @@ pub fn run(
     for dir in scene_dirs {
         StudyScene::read(dir)?;
     }
-    let mut results = Results::open(out)?;
+    let mut results = Results::open(out, record::this_build())?;
+    if results.other_builds > 0 {
+        eprintln!(
+            "alp study: {} rows of {} were run by another build of alp: their runs are done again",
+            results.other_builds,
+            out.join("results.jsonl").display()
+        );
+    }
     let total = scene_dirs.len() * variants.len();
     let mut done = 0;
     for dir in scene_dirs {

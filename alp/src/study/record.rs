@@ -62,6 +62,10 @@ pub struct Row {
     /// Why the run did not happen: a perturbation this scene cannot take
     /// (the probe too small to make smaller, a border cut no crop makes).
     pub skipped: Option<String>,
+    /// The `alp` binary that ran it ([`this_build`]): a rerun by another
+    /// build runs the scene again instead of mixing two builds' figures.
+    #[serde(default)]
+    pub build: String,
 }
 
 impl Row {
@@ -91,6 +95,7 @@ impl Row {
             non_finite: false,
             error: None,
             skipped: None,
+            build: String::new(),
         }
     }
 
@@ -126,6 +131,7 @@ impl Row {
             self.non_finite.to_string(),
             csv_text(self.error.as_deref().unwrap_or("")),
             csv_text(self.skipped.as_deref().unwrap_or("")),
+            csv_text(&self.build),
         ]
     }
 }
@@ -133,7 +139,26 @@ impl Row {
 /// The columns of `results.csv`, [`Row`]'s fields.
 pub const CSV_HEADER: &str = "scene,probe,family,variant,threads,level,strength,mirror_deg,shiny_deg,diffuse_deg,\
 mirror_si_rmse,shiny_si_rmse,diffuse_si_rmse,rotation_deg,axis_deg,translation_mm,pose_found,wall_s,peak_mb,\
-warning,non_finite,error,skipped";
+warning,non_finite,error,skipped,build";
+
+/// This `alp` binary's identity: a hash of the executable's bytes (16 hex
+/// digits; `unknown` where it cannot be read): the same for every build of
+/// the same source by the same toolchain.
+pub fn this_build() -> &'static str {
+    static BUILD: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    BUILD.get_or_init(|| {
+        use std::hash::Hasher;
+        match std::env::current_exe().and_then(std::fs::read) {
+            Ok(bytes) => {
+                // Fixed keys: the same bytes, the same digits (under one toolchain).
+                let mut hasher = std::hash::DefaultHasher::new();
+                hasher.write(&bytes);
+                format!("{:016x}", hasher.finish())
+            }
+            Err(_) => "unknown".into(),
+        }
+    })
+}
 
 /// A CSV field: quoted when it holds a comma, quote or line break.
 pub fn csv_text(s: &str) -> String {
@@ -146,8 +171,11 @@ pub fn csv_text(s: &str) -> String {
 /// `results.jsonl` of a study's output folder: the rows so far.
 pub struct Results {
     path: PathBuf,
-    /// Every row, in the order run.
+    /// Every row of `build`, in the order run.
     pub rows: Vec<Row>,
+    /// Rows in the file that another build ran (kept there, not summed up).
+    pub other_builds: usize,
+    build: String,
     done: BTreeSet<(String, String)>,
 }
 
@@ -155,7 +183,8 @@ impl Results {
     /// Opens (or starts) `dir/results.jsonl`. A last line cut short (a run
     /// killed while writing it) is dropped with a warning and redone; any
     /// other line that is not a row is an error naming the file and line.
-    pub fn open(dir: &Path) -> Result<Self> {
+    /// Only the rows `build` ran count as done.
+    pub fn open(dir: &Path, build: &str) -> Result<Self> {
         std::fs::create_dir_all(dir).map_err(|e| RenderError::io(dir, "create folder", e))?;
         let path = dir.join("results.jsonl");
         let mut rows = Vec::new();
@@ -184,8 +213,16 @@ impl Results {
                 }
             }
         }
+        let before = rows.len();
+        rows.retain(|r| r.build == build);
         let done = rows.iter().map(|r| (r.scene.clone(), r.variant.clone())).collect();
-        Ok(Results { path, rows, done })
+        Ok(Results {
+            path,
+            other_builds: before - rows.len(),
+            rows,
+            build: build.to_string(),
+            done,
+        })
     }
 
     /// Whether `scene` has run under `variant`.
@@ -193,8 +230,12 @@ impl Results {
         self.done.contains(&(scene.to_string(), variant.to_string()))
     }
 
-    /// Appends a finished run (one whole line, flushed).
+    /// Appends a finished run (one whole line, flushed), as this build's.
     pub fn push(&mut self, row: Row) -> Result<()> {
+        let row = Row {
+            build: self.build.clone(),
+            ..row
+        };
         let line = serde_json::to_string(&row).map_err(|e| RenderError::io(&self.path, "serialise", e))? + "\n";
         let mut file = std::fs::OpenOptions::new()
             .create(true)
@@ -256,7 +297,7 @@ mod tests {
     fn rows_survive_a_reopen_and_a_cut_short_line_is_redone() {
         let dir = std::env::temp_dir().join(format!("alp-study-record-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let mut results = Results::open(&dir).expect("open");
+        let mut results = Results::open(&dir, "one").expect("open");
         results.push(row("a", "quality=fast")).expect("push");
         results.push(row("b", "quality=fast")).expect("push");
         // A run killed while writing its line.
@@ -267,8 +308,12 @@ mod tests {
         file.write_all(br#"{"scene":"c","fam"#).expect("write");
         drop(file);
         let whole = std::fs::read_to_string(dir.join("results.jsonl")).expect("read");
-        let reopened = Results::open(&dir).expect("reopen");
-        assert_eq!(reopened.rows, vec![row("a", "quality=fast"), row("b", "quality=fast")]);
+        let reopened = Results::open(&dir, "one").expect("reopen");
+        let ran = |scene: &str| Row {
+            build: "one".into(),
+            ..row(scene, "quality=fast")
+        };
+        assert_eq!(reopened.rows, vec![ran("a"), ran("b")]);
         let kept = std::fs::read_to_string(dir.join("results.jsonl")).expect("read");
         assert_eq!(
             kept,
@@ -277,9 +322,12 @@ mod tests {
         );
         assert!(reopened.has("b", "quality=fast"));
         assert!(!reopened.has("c", "quality=fast") && !reopened.has("a", "quality=best"));
+        // Another build runs them again, and sums up its own rows only.
+        let other = Results::open(&dir, "two").expect("reopen");
+        assert!(!other.has("b", "quality=fast") && other.rows.is_empty() && other.other_builds == 2);
         // A broken line in the middle is an error naming the file and line.
         std::fs::write(dir.join("results.jsonl"), "{}\n{}\n").expect("write");
-        let err = Results::open(&dir).err().expect("an error").to_string();
+        let err = Results::open(&dir, "one").err().expect("an error").to_string();
         assert!(err.contains("results.jsonl") && err.contains("line 1"), "{err}");
         std::fs::remove_dir_all(&dir).expect("clean up");
     }
