@@ -120,6 +120,15 @@ fn a_study_writes_its_tables_and_chart_and_a_rerun_skips_what_it_has() {
     let added: Vec<&str> = after[before.len()..].lines().collect();
     assert_eq!(added.len(), 2, "{added:?}");
     assert!(added.iter().all(|l| l.contains("\"variant\":\"lighting=adam\"")));
+    // A rerun on one of the scenes runs nothing and tables that scene only.
+    let run = study(&scenes.join("can_1"), &out, &["--families", "threads,lighting"]);
+    assert!(
+        run.status.success(),
+        "one scene: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
+    assert_eq!(csv.lines().count(), 1 + 3, "one scene's three settings: {csv}");
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 

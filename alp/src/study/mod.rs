@@ -186,6 +186,12 @@ pub fn run(
         }
     }
     progress(done, total, "");
+    // The tables cover the scenes asked for, every setting on the same ones.
+    let names: Vec<String> = scene_dirs
+        .iter()
+        .filter_map(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    results.rows.retain(|r| names.contains(&r.scene));
     Ok(results)
 }
 
