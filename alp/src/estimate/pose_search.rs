@@ -563,7 +563,7 @@ mod tests {
             &FitRequest {
                 size: work,
                 render: RenderSettings { spp: 16, seed: 78 },
-                sampling: LightSampling::BSDF.with_interreflection(),
+                sampling: settings.lighting.model.sampling(None),
                 smoothness: Smoothness::quadratic(settings.lighting.smoothness),
                 purpose: LightingPurpose::Output,
                 pixels: Pixels::All,

@@ -183,18 +183,16 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
     // Normalised by the mean weight over pixels and channels: the same as
     // a per-pixel weight's sum when the channels weigh alike.
     let weight_sum: f64 = weight.iter().flatten().sum::<f64>().max(1e-30) / 3.0;
-    let mean_sq = target
-        .iter()
-        .zip(weight)
-        .map(|(t, wt)| (0..3).map(|c| wt[c] * t[c] * t[c]).sum::<f64>() / 3.0)
-        .sum::<f64>()
-        / weight_sum;
-    let lambda = settings.smoothness.weight / mean_sq.max(1e-30) / (w * h) as f64;
-    // The data term over the target's weighted energy: both terms are then
+    // The data term is over the target's weighted energy: both terms are then
     // alike in any exposure (over `weight_sum` alone, a photo ten times
     // brighter would weigh its data a hundred times more against the prior
     // whenever the weights are relative, 1 / level^2, as the estimate's are).
-    let data_norm = weight_sum * mean_sq.max(1e-30);
+    let data_norm = (target.iter().zip(weight))
+        .map(|(t, wt)| (0..3).map(|c| wt[c] * t[c] * t[c]).sum::<f64>() / 3.0)
+        .sum::<f64>()
+        .max(1e-30);
+    let mean_sq = data_norm / weight_sum;
+    let lambda = settings.smoothness.weight / mean_sq / (w * h) as f64;
     // Differences may count relative to the local radiance level of the
     // start (a bright light's edge is no rougher than a dark wall's texture).
     let level: Vec<f64> = x0
