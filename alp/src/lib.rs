@@ -4,12 +4,14 @@
 //!
 //! This crate holds what the method adds on top of the renderer: output
 //! folders written atomically, the probe catalogue, the declarative
-//! objective, the estimation, evaluation and the `alp` CLI.
+//! objective, the estimation, evaluation, virtual object insertion and the
+//! `alp` CLI.
 
 pub mod acquire;
 pub mod error;
 pub mod estimate;
 pub mod eval;
+pub mod insert;
 pub mod objective;
 pub mod output;
 pub mod probes;

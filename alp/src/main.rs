@@ -27,6 +27,9 @@ enum Command {
     Estimate(alp::estimate::cli::EstimateArgs),
     /// Make a probe asset from a capture: many views of the object under known lighting.
     Acquire(alp::acquire::cli::AcquireArgs),
+    /// Insert a virtual object into a photo under its estimated lighting, with the shadow it
+    /// casts on a ground plane (differential rendering): linear EXR plus a PNG.
+    Insert(alp::insert::cli::InsertArgs),
     /// Render a probe at a pose under an environment map (linear EXR plus a PNG preview).
     Render(RenderArgs),
     /// Render the evaluation's mirror, shiny and diffuse spheres under an env map (768x256 EXR, left to right).
@@ -214,6 +217,7 @@ fn main() -> ExitCode {
         Command::Estimate(args) => alp::estimate::cli::run(&args),
         Command::Acquire(args) => alp::acquire::cli::run(&args),
         Command::Study { study } => alp::study::cli::run(&study),
+        Command::Insert(args) => alp::insert::cli::run(&args),
         Command::Render(args) => render(&args),
         Command::Relight(args) => relight(&args),
         Command::Eval(args) => eval(&args),

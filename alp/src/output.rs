@@ -1,7 +1,7 @@
-//! Output folders are written whole or not at all: everything goes to a
-//! temporary sibling folder that is renamed into place at the end, so a
-//! failed or interrupted run never leaves a half-written `OUT_DIR` (and never
-//! destroys the one a previous run left).
+//! Outputs are written whole or not at all: everything goes to a temporary
+//! sibling (folder or files) renamed into place at the end, so a failed or
+//! interrupted run never leaves a half-written output (and never destroys the
+//! one a previous run left).
 
 use std::path::{Path, PathBuf};
 
@@ -39,6 +39,57 @@ pub fn write_folder_atomically(out: &Path, write: impl FnOnce(&Path) -> Result<(
     Ok(())
 }
 
+/// How to write one output file (to the path it is given).
+pub type WriteFile<'a> = Box<dyn FnOnce(&Path) -> Result<()> + 'a>;
+
+/// One output file and how to write it.
+pub type FileWriter<'a> = (&'a Path, WriteFile<'a>);
+
+/// Writes each file to a temporary sibling of the same extension (writers
+/// pick the format by it); once all are written, renames them into place.
+/// On an error no file is replaced and the temporaries are removed.
+pub fn write_files_atomically(files: Vec<FileWriter<'_>>) -> Result<()> {
+    let mut written: Vec<(PathBuf, &Path)> = Vec::new();
+    let mut outcome = Ok(());
+    for (path, write) in files {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if name.is_empty() {
+            outcome = Err(RenderError::file(path, "an output file needs a name").into());
+            break;
+        }
+        let parent = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        if let Err(e) = std::fs::create_dir_all(&parent) {
+            outcome = Err(RenderError::io(&parent, "create folder", e).into());
+            break;
+        }
+        let tmp = parent.join(format!(".partial-{}-{name}", std::process::id()));
+        let result = write(&tmp);
+        written.push((tmp, path));
+        if let Err(e) = result {
+            outcome = Err(e);
+            break;
+        }
+    }
+    if outcome.is_ok() {
+        for (tmp, path) in &written {
+            if let Err(e) = std::fs::rename(tmp, path) {
+                outcome = Err(RenderError::io(path, "move the new output into place", e).into());
+                break;
+            }
+        }
+    }
+    for (tmp, _) in &written {
+        let _ = std::fs::remove_file(tmp);
+    }
+    outcome
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -64,6 +115,29 @@ mod tests {
         })
         .expect("replace");
         assert!(!out.join("a.txt").exists() && out.join("b.txt").exists());
+        std::fs::remove_dir_all(&base).expect("clean up");
+    }
+
+    #[test]
+    fn files_are_replaced_together_or_not_at_all() {
+        let base = std::env::temp_dir().join(format!("alp-output-files-test-{}", std::process::id()));
+        let (a, b) = (base.join("a.txt"), base.join("b.txt"));
+        let writer = |body: &'static str| -> WriteFile<'static> {
+            Box::new(move |p: &Path| std::fs::write(p, body).map_err(|e| RenderError::io(p, "write", e).into()))
+        };
+        write_files_atomically(vec![(&a, writer("a1")), (&b, writer("b1"))]).expect("first write");
+        let failing: WriteFile<'static> = Box::new(|p: &Path| Err(RenderError::file(p, "simulated failure").into()));
+        assert!(write_files_atomically(vec![(&a, writer("a2")), (&b, failing)]).is_err());
+        assert_eq!(
+            std::fs::read_to_string(&a).expect("a"),
+            "a1",
+            "the first file is not replaced alone"
+        );
+        assert_eq!(
+            std::fs::read_dir(&base).expect("base").count(),
+            2,
+            "no temporary file is left behind"
+        );
         std::fs::remove_dir_all(&base).expect("clean up");
     }
 }

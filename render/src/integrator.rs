@@ -1044,21 +1044,23 @@ const SPP_PER_PASS: u32 = 16;
 const SILHOUETTE_SPP_FACTOR: u32 = 4;
 
 /// Renders the probe at `pose` under `env` (f32, no gradients): the image
-/// (black background) and the hard coverage mask (at least half of a pixel's
-/// samples see the probe). Light is sampled by MIS of the BRDF and the env
-/// map ([`LightSampling::mis`]), and what the probe reflects onto itself
-/// by one bounce ([`LightSampling::interreflection`]); silhouette pixels get
+/// (black background, each pixel the sum of its probe samples' radiance over
+/// all its samples: premultiplied by the coverage) and the share of each
+/// pixel's samples that see the probe, for compositing over a photo. Light
+/// is sampled by MIS of the BRDF and the env map ([`LightSampling::mis`]),
+/// and what the probe reflects onto itself by one bounce
+/// ([`LightSampling::interreflection`]); silhouette pixels get
 /// `SILHOUETTE_SPP_FACTOR` times the samples ([`PrimaryHits::trace_refined`]).
 /// High sample counts run in passes of at most 16 spp (seeds `seed`,
 /// `seed + 2^32`, ...), averaged, so memory stays bounded.
-pub fn render_image(
+pub fn render_layer(
     probe: &ProbeAsset,
     pose: &Pose,
     camera: &Camera,
     env: &EnvMap,
     bsdf: &dyn Bsdf<f32>,
     settings: &RenderSettings,
-) -> (RgbImage, Mask) {
+) -> (RgbImage, Vec<f32>) {
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut sum = vec![[0.0f64; 3]; w * h];
     let mut covered = vec![0.0f64; w * h];
@@ -1111,6 +1113,20 @@ pub fn render_image(
         }
     }
     let image = RgbImage::new(w, h, sum.iter().map(|p| p.map(|v| v as f32)).collect());
-    let mask = Mask::new(w, h, covered.iter().map(|&c| c >= 0.5).collect());
+    (image, covered.iter().map(|&c| c as f32).collect())
+}
+
+/// [`render_layer`] with its coverage made a hard mask: at least half of a
+/// pixel's samples see the probe.
+pub fn render_image(
+    probe: &ProbeAsset,
+    pose: &Pose,
+    camera: &Camera,
+    env: &EnvMap,
+    bsdf: &dyn Bsdf<f32>,
+    settings: &RenderSettings,
+) -> (RgbImage, Mask) {
+    let (image, coverage) = render_layer(probe, pose, camera, env, bsdf, settings);
+    let mask = Mask::new(image.width, image.height, coverage.iter().map(|&c| c >= 0.5).collect());
     (image, mask)
 }

@@ -12,6 +12,15 @@ use glam::{Vec2, Vec3};
 use crate::error::{RenderError, Result};
 use crate::pose::Pose;
 
+/// Whether [`Mesh::read_obj_with`] requires texture coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Uvs {
+    /// A mesh without `vt` is an error (a probe's textures need them).
+    Required,
+    /// A mesh without `vt` gets zero uvs.
+    Optional,
+}
+
 /// An indexed triangle mesh with one position, normal and uv per vertex (OBJ `single_index` layout).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Mesh {
@@ -49,6 +58,12 @@ impl Mesh {
 
     /// Reads a Wavefront OBJ (all objects/groups merged, triangulated); requires `vt`, computes normals when `vn` is absent.
     pub fn read_obj(path: impl AsRef<Path>) -> Result<Self> {
+        Self::read_obj_with(path, Uvs::Required)
+    }
+
+    /// [`read_obj`](Self::read_obj), with `vt` optional when `uvs` says so
+    /// (all zero where absent: an object of constant material needs none).
+    pub fn read_obj_with(path: impl AsRef<Path>, uvs_rule: Uvs) -> Result<Self> {
         let path = path.as_ref();
         let options = tobj::LoadOptions {
             single_index: true,
@@ -65,7 +80,11 @@ impl Mesh {
             if count == 0 {
                 continue;
             }
-            if m.texcoords.len() != 2 * count {
+            if m.texcoords.len() == 2 * count {
+                uvs.extend(m.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], t[1])));
+            } else if uvs_rule == Uvs::Optional {
+                uvs.extend(std::iter::repeat_n(Vec2::ZERO, count));
+            } else {
                 return Err(RenderError::field(
                     path,
                     format!("o/g {}", model.name),
@@ -75,7 +94,6 @@ impl Mesh {
             all_have_normals &= m.normals.len() == 3 * count;
             let base = positions.len() as u32;
             positions.extend(m.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
-            uvs.extend(m.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], t[1])));
             normals.extend(m.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])));
             triangles.extend(
                 m.indices
