@@ -10,6 +10,9 @@ use crate::error::{Error, Result};
 /// The procedural probes `alp probe make` writes.
 pub const PROCEDURAL: [&str; 3] = ["can", "cap", "sphere"];
 
+/// Radius of the procedural `sphere`, metres.
+pub const SPHERE_RADIUS: f32 = 0.03;
+
 /// Builds a procedural probe: `can` (a soda can), `cap` (a thermos cap) or
 /// `sphere` (a 3 cm sphere with the evaluation's "shiny" roughness).
 pub fn procedural(kind: &str) -> Result<ProbeAsset> {
@@ -17,7 +20,7 @@ pub fn procedural(kind: &str) -> Result<ProbeAsset> {
         "can" | "soda_can" => Ok(SodaCan::default().build()),
         "cap" | "thermos_cap" => Ok(ThermosCap::default().build()),
         "sphere" => Ok(UvSphere {
-            radius: 0.03,
+            radius: SPHERE_RADIUS,
             ..UvSphere::default()
         }
         .build()),

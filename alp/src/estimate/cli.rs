@@ -1,7 +1,7 @@
 //! `alp estimate`: the main job, from files to an output folder.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use render::RenderError;
@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 
 use super::lighting::LightingMethod;
 use super::settings::ADAM_LIGHTING;
-use super::{Photo, Quality, Settings, estimate_with_progress};
+use super::{Estimate, Photo, Quality, Settings, estimate_with_progress};
 use crate::objective::Objective;
 
 /// Flags of `alp estimate`.
@@ -155,18 +155,21 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         }
         eprintln!("  PSNR {:.2} dB, {:.2} s", result.report.psnr_db, result.report.wall_s);
     }
-    crate::output::write_folder_atomically(&args.out, |dir| {
-        result.env.write(dir.join("env.exr"))?;
-        result.pose.write(dir.join("pose.json"))?;
-        result.confidence.write(dir.join("confidence.exr"))?;
-        result.rerender.write_exr(dir.join("rerender.exr"))?;
-        preview(&photo.image, &result.rerender, &result.env.to_image())
-            .write_png_preview(dir.join("preview.png"), 0.0)?;
-        let json = serde_json::to_string_pretty(&result.report)
-            .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
-        std::fs::write(dir.join("report.json"), json + "\n")
-            .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
-    })
+    crate::output::write_folder_atomically(&args.out, |dir| write_estimate(dir, &photo.image, &result))
+}
+
+/// Writes an estimate's files into `dir`: `env.exr`, `pose.json`,
+/// `confidence.exr`, `rerender.exr`, `preview.png` and `report.json`.
+pub(crate) fn write_estimate(dir: &Path, photo: &RgbImage, result: &Estimate) -> Result<()> {
+    result.env.write(dir.join("env.exr"))?;
+    result.pose.write(dir.join("pose.json"))?;
+    result.confidence.write(dir.join("confidence.exr"))?;
+    result.rerender.write_exr(dir.join("rerender.exr"))?;
+    preview(photo, &result.rerender, &result.env.to_image()).write_png_preview(dir.join("preview.png"), 0.0)?;
+    let json = serde_json::to_string_pretty(&result.report)
+        .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
+    std::fs::write(dir.join("report.json"), json + "\n")
+        .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
 }
 
 /// A pool of `threads` workers (all cores when `None`).
