@@ -93,6 +93,71 @@ impl RgbImage {
         }
     }
 
+    /// Reads a photo by its extension: OpenEXR (`.exr`) and Radiance
+    /// (`.hdr`) as linear radiance; 8- or 16-bit PNG and JPEG (`.png`,
+    /// `.jpg`, `.jpeg`) decoded from sRGB to linear in [0, 1] (alpha
+    /// dropped). The [`PhotoEncoding`] says which, for a warning: an sRGB
+    /// photo's exposure is unknown and its highlights clip at 1.
+    pub fn read_photo(path: impl AsRef<Path>) -> Result<(Self, PhotoEncoding)> {
+        let path = path.as_ref();
+        let extension = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        let decode = || {
+            image::ImageReader::open(path)
+                .map_err(|e| RenderError::io(path, "open image", e))?
+                .with_guessed_format()
+                .map_err(|e| RenderError::io(path, "open image", e))?
+                .decode()
+                .map_err(|e| RenderError::io(path, "decode image", e))
+        };
+        let (image, encoding) = match extension.as_str() {
+            "exr" => return Ok((Self::read_exr(path)?, PhotoEncoding::Linear)),
+            "hdr" => (Self::from_rgb32f(decode()?.into_rgb32f(), |v| v), PhotoEncoding::Linear),
+            "png" | "jpg" | "jpeg" => {
+                let decoded = decode()?;
+                let bits = match decoded.color().bytes_per_pixel() / decoded.color().channel_count() {
+                    1 => 8,
+                    2 => 16,
+                    _ => {
+                        return Err(RenderError::file(
+                            path,
+                            format!(
+                                "a {:?} image: PNG and JPEG photos must be 8 or 16 bits per channel",
+                                decoded.color()
+                            ),
+                        ));
+                    }
+                };
+                (
+                    Self::from_rgb32f(decoded.into_rgb32f(), srgb_decode),
+                    PhotoEncoding::Srgb { bits },
+                )
+            }
+            other => {
+                return Err(RenderError::file(
+                    path,
+                    format!("unsupported photo format `.{other}`: give OpenEXR (.exr), Radiance (.hdr), PNG or JPEG"),
+                ));
+            }
+        };
+        if image.width == 0 || image.height == 0 {
+            return Err(RenderError::file(path, "image is empty"));
+        }
+        match image.first_invalid(|v| v.is_finite() && v >= 0.0, "is not a finite radiance >= 0") {
+            Some(rule) => Err(RenderError::file(path, rule)),
+            None => Ok((image, encoding)),
+        }
+    }
+
+    /// An RGB image from a decoded float buffer, each value through `map`.
+    fn from_rgb32f(rgb: image::Rgb32FImage, map: impl Fn(f32) -> f32) -> Self {
+        let (width, height) = (rgb.width() as usize, rgb.height() as usize);
+        let pixels = rgb.pixels().map(|p| p.0.map(&map)).collect();
+        Self::new(width, height, pixels)
+    }
+
     /// Describes the first value for which `valid` is false ("texel (row r, col c) channel G = -1 `rule`"), if any.
     pub(crate) fn first_invalid(&self, valid: impl Fn(f32) -> bool, rule: &str) -> Option<String> {
         let i = self.pixels.iter().position(|p| !p.iter().all(|&v| valid(v)))?;
@@ -145,6 +210,27 @@ impl RgbImage {
     }
 }
 
+/// The inverse sRGB transfer function (IEC 61966-2-1): an encoded value in [0, 1] to linear.
+fn srgb_decode(encoded: f32) -> f32 {
+    if encoded <= 0.040_45 {
+        encoded / 12.92
+    } else {
+        ((encoded + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// How a photo's values relate to radiance ([`RgbImage::read_photo`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PhotoEncoding {
+    /// Linear radiance (OpenEXR, Radiance HDR).
+    Linear,
+    /// Display-referred sRGB of this many bits, decoded to linear in [0, 1].
+    Srgb {
+        /// Bits per channel: 8 or 16.
+        bits: u8,
+    },
+}
+
 /// The sRGB transfer function (IEC 61966-2-1) of a linear value clamped to [0, 1]; NaN maps to 0.
 fn srgb_encode(linear: f32) -> f32 {
     let x = if linear.is_nan() { 0.0 } else { linear.clamp(0.0, 1.0) };
@@ -178,26 +264,34 @@ impl Mask {
         Self { width, height, inside }
     }
 
-    /// Reads an 8-bit grayscale PNG; a value > 127 marks the probe.
+    /// Reads an 8-bit mask image (PNG, or any format the decoder knows): a
+    /// grey value (the luma of a colour one) > 127 marks the probe, and
+    /// where the image has alpha, a pixel must also be opaque (alpha > 127).
     pub fn read_png(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let decoded = image::ImageReader::open(path)
-            .map_err(|e| RenderError::io(path, "open PNG", e))?
+            .map_err(|e| RenderError::io(path, "open mask", e))?
             .with_guessed_format()
-            .map_err(|e| RenderError::io(path, "open PNG", e))?
+            .map_err(|e| RenderError::io(path, "open mask", e))?
             .decode()
-            .map_err(|e| RenderError::io(path, "decode PNG", e))?;
-        let image::DynamicImage::ImageLuma8(gray) = decoded else {
+            .map_err(|e| RenderError::io(path, "decode mask", e))?;
+        if decoded.color().bytes_per_pixel() != decoded.color().channel_count() {
             return Err(RenderError::file(
                 path,
-                format!("mask must be an 8-bit grayscale PNG, found {:?}", decoded.color()),
+                format!("a mask must have 8 bits per channel, found {:?}", decoded.color()),
             ));
+        }
+        let (width, height) = (decoded.width() as usize, decoded.height() as usize);
+        let opaque: Vec<bool> = if decoded.color().has_alpha() {
+            decoded.to_rgba8().pixels().map(|p| p.0[3] > 127).collect()
+        } else {
+            vec![true; width * height]
         };
-        let (width, height) = (gray.width() as usize, gray.height() as usize);
+        let luma = decoded.into_luma8().into_raw();
         Ok(Self::new(
             width,
             height,
-            gray.into_raw().into_iter().map(|v| v > 127).collect(),
+            luma.into_iter().zip(opaque).map(|(v, o)| v > 127 && o).collect(),
         ))
     }
 
@@ -252,5 +346,104 @@ mod tests {
         assert!((srgb_encode(1.0) - 1.0).abs() < 1e-6);
         assert_eq!(srgb_encode(7.0), srgb_encode(1.0));
         assert!((srgb_encode(0.18) - 0.461_356).abs() < 1e-5);
+    }
+
+    #[test]
+    fn srgb_decoding_inverts_encoding() {
+        for v in [0.0f32, 0.001, 0.0031308, 0.18, 0.5, 1.0] {
+            assert!((srgb_decode(srgb_encode(v)) - v).abs() < 1e-6, "{v}");
+        }
+    }
+
+    fn folder(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("render-image-io-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        dir
+    }
+
+    /// Every format a photo may come in, read back as the radiance it encodes.
+    #[test]
+    fn photos_of_every_format_read_as_linear_radiance() {
+        let dir = folder("photos");
+        let (w, h) = (4u32, 3u32);
+        // sRGB 188 is linear 0.5029; 16-bit 48316 the same level.
+        let srgb8: Vec<u8> = (0..w * h * 3).map(|_| 188).collect();
+        image::save_buffer(dir.join("a.png"), &srgb8, w, h, image::ExtendedColorType::Rgb8).expect("png");
+        image::save_buffer(dir.join("a.jpg"), &srgb8, w, h, image::ExtendedColorType::Rgb8).expect("jpeg");
+        let srgb16 =
+            image::ImageBuffer::<image::Rgba<u16>, _>::from_pixel(w, h, image::Rgba([48316, 48316, 48316, 65535]));
+        srgb16.save(dir.join("b.png")).expect("png16");
+        // RGBE shares one exponent: channels within a factor of ten keep 1 %.
+        let hdr = image::Rgb32FImage::from_pixel(w, h, image::Rgb([2.0, 4.0, 9.0]));
+        image::DynamicImage::ImageRgb32F(hdr)
+            .save(dir.join("c.hdr"))
+            .expect("hdr");
+        RgbImage::filled(w as usize, h as usize, [0.25, 4.0, 100.0])
+            .write_exr(dir.join("d.exr"))
+            .expect("exr");
+        let cases = [
+            ("a.png", [0.5029; 3], PhotoEncoding::Srgb { bits: 8 }, 1e-3),
+            ("a.jpg", [0.5029; 3], PhotoEncoding::Srgb { bits: 8 }, 0.02),
+            ("b.png", [0.5029; 3], PhotoEncoding::Srgb { bits: 16 }, 1e-3),
+            ("c.hdr", [2.0, 4.0, 9.0], PhotoEncoding::Linear, 0.01),
+            ("d.exr", [0.25, 4.0, 100.0], PhotoEncoding::Linear, 1e-6),
+        ];
+        for (name, expected, encoding, tolerance) in cases {
+            let (image, found) = RgbImage::read_photo(dir.join(name)).expect(name);
+            assert_eq!(
+                (image.width, image.height, found),
+                (w as usize, h as usize, encoding),
+                "{name}"
+            );
+            for p in &image.pixels {
+                for c in 0..3 {
+                    assert!(
+                        (p[c] / expected[c] - 1.0).abs() < tolerance,
+                        "{name}: {p:?} vs {expected:?}"
+                    );
+                }
+            }
+        }
+        std::fs::write(dir.join("e.tif"), b"II*\0").expect("tif");
+        let error = RgbImage::read_photo(dir.join("e.tif")).expect_err("tif").to_string();
+        assert!(error.contains("e.tif") && error.contains(".tif"), "{error}");
+        std::fs::write(dir.join("f.png"), b"\x89PNG truncated").expect("broken");
+        let error = RgbImage::read_photo(dir.join("f.png")).expect_err("broken").to_string();
+        assert!(error.contains("f.png"), "{error}");
+        std::fs::remove_dir_all(&dir).expect("clean up");
+    }
+
+    /// A mask may be grey, colour or with alpha; 16 bits are refused.
+    #[test]
+    fn masks_of_any_8_bit_layout_are_read() {
+        let dir = folder("masks");
+        let (w, h) = (3u32, 1u32);
+        image::save_buffer(dir.join("grey.png"), &[0, 200, 255], w, h, image::ExtendedColorType::L8).expect("grey");
+        image::save_buffer(
+            dir.join("rgb.png"),
+            &[0, 0, 0, 200, 200, 200, 255, 255, 255],
+            w,
+            h,
+            image::ExtendedColorType::Rgb8,
+        )
+        .expect("rgb");
+        // White everywhere, the first pixel transparent.
+        image::save_buffer(
+            dir.join("rgba.png"),
+            &[255, 255, 255, 0, 255, 255, 255, 255, 255, 255, 255, 255],
+            w,
+            h,
+            image::ExtendedColorType::Rgba8,
+        )
+        .expect("rgba");
+        for name in ["grey.png", "rgb.png", "rgba.png"] {
+            let mask = Mask::read_png(dir.join(name)).expect(name);
+            assert_eq!(mask.inside, vec![false, true, true], "{name}");
+        }
+        image::save_buffer(dir.join("deep.png"), &[0u8; 6], w, h, image::ExtendedColorType::L16).expect("16-bit");
+        let error = Mask::read_png(dir.join("deep.png")).expect_err("16-bit").to_string();
+        assert!(error.contains("deep.png") && error.contains("8 bits"), "{error}");
+        std::fs::remove_dir_all(&dir).expect("clean up");
     }
 }

@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use render::RenderError;
 use render::camera::Camera;
-use render::image_io::{Mask, RgbImage};
+use render::image_io::{Mask, PhotoEncoding, RgbImage};
 use render::pose::Pose;
 
 use crate::error::{Error, Result};
@@ -19,10 +19,10 @@ use crate::objective::Objective;
 /// Flags of `alp estimate`.
 #[derive(clap::Args, Debug)]
 pub struct EstimateArgs {
-    /// The photo: linear HDR RGB EXR.
+    /// The photo: linear HDR (OpenEXR or Radiance .hdr), or an 8/16-bit sRGB PNG or JPEG (linearised, with a warning).
     #[arg(long)]
     pub image: PathBuf,
-    /// The probe's mask: 8-bit PNG, > 127 marks the probe.
+    /// The probe's mask: an 8-bit image (PNG), grey or colour > 127 marks the probe (opaque pixels only, when it has alpha).
     #[arg(long)]
     pub mask: PathBuf,
     /// camera.json of the photo.
@@ -126,7 +126,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         settings.objective = Arc::new(Objective::from_file(path)?);
     }
     let camera = Camera::read(&args.camera)?;
-    let image = RgbImage::read_exr(&args.image)?;
+    let image = read_photo(&args.image)?;
     let mask = Mask::read_png(&args.mask)?;
     let photo = Photo::new(image, mask, camera).map_err(|e| e.in_file(&args.image))?;
     let probe = crate::probes::load(&args.probe)?;
@@ -170,6 +170,21 @@ pub(crate) fn write_estimate(dir: &Path, photo: &RgbImage, result: &Estimate) ->
         .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
     std::fs::write(dir.join("report.json"), json + "\n")
         .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
+}
+
+/// Reads a photo (OpenEXR, Radiance HDR, PNG or JPEG: [`RgbImage::read_photo`]),
+/// warning on stderr when it is display-referred sRGB.
+pub(crate) fn read_photo(path: &Path) -> Result<RgbImage> {
+    let (image, encoding) = RgbImage::read_photo(path)?;
+    if let PhotoEncoding::Srgb { bits } = encoding {
+        eprintln!(
+            "alp: warning: {} is a {bits}-bit sRGB image, not HDR: it is linearised, its clipped highlights are \
+             left out (the brightest lights come out dimmer than they are) and its exposure is unknown \
+             (the map is right up to one scale)",
+            path.display()
+        );
+    }
+    Ok(image)
 }
 
 /// A pool of `threads` workers (all cores when `None`).

@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use render::camera::Camera;
 use render::envmap::EnvMap;
-use render::image_io::RgbImage;
 use render::pose::Pose;
 
 use super::{Finish, Ground, InsertSettings, MaterialSpec, VirtualObject, insert};
@@ -14,7 +13,7 @@ use crate::output::write_files_atomically;
 /// Flags of `alp insert`.
 #[derive(clap::Args, Debug)]
 pub struct InsertArgs {
-    /// The photo: linear HDR RGB EXR.
+    /// The photo: linear HDR (OpenEXR or Radiance .hdr), or an 8/16-bit sRGB PNG or JPEG (linearised, with a warning).
     #[arg(long)]
     pub image: PathBuf,
     /// The lighting: an env map (e.g. `alp estimate`'s env.exr).
@@ -109,7 +108,7 @@ fn parse_albedo(s: &str) -> Result<[f32; 3]> {
 pub fn run(args: &InsertArgs) -> Result<()> {
     let material = material(args)?;
     let object = VirtualObject::load(&args.object, material.as_ref())?;
-    let photo = RgbImage::read_exr(&args.image)?;
+    let photo = crate::estimate::cli::read_photo(&args.image)?;
     let env = EnvMap::read(&args.env)?;
     let camera = Camera::read(&args.camera)?;
     let pose = Pose::read(&args.pose)?;
