@@ -8,6 +8,7 @@
 //! `alp` CLI.
 
 pub mod acquire;
+pub mod batch;
 pub mod demo;
 pub mod error;
 pub mod estimate;

@@ -33,6 +33,8 @@ enum Command {
     },
     /// Estimate the lighting and the probe's pose from a photo (the main job).
     Estimate(alp::estimate::cli::EstimateArgs),
+    /// The estimate over a dataset: a manifest of photos, sharded over machines, resumable.
+    Batch(alp::batch::BatchArgs),
     /// Make a probe asset from a capture: many views of the object under known lighting.
     Acquire(alp::acquire::cli::AcquireArgs),
     /// Insert a virtual object into a photo under its estimated lighting, with the shadow it
@@ -225,6 +227,7 @@ fn main() -> ExitCode {
         Command::Demo { out } => demo(&out),
         Command::Estimate(args) => alp::estimate::cli::run(&args),
         Command::Acquire(args) => alp::acquire::cli::run(&args),
+        Command::Batch(args) => alp::batch::cli(&args),
         Command::Study { study } => alp::study::cli::run(&study),
         Command::Insert(args) => alp::insert::cli::run(&args),
         Command::Render(args) => render(&args),

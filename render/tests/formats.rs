@@ -171,11 +171,14 @@ fn masks_round_trip_and_check_sizes() {
     );
     assert_error(read_image_and_mask(&image_path, &mask_path), "image.exr", "size 12x6");
 
+    // Colour masks count by their grey value; 16-bit ones are refused.
     image::save_buffer(&mask_path, &[0; 12], 2, 2, image::ExtendedColorType::Rgb8).unwrap();
+    assert_eq!(Mask::read_png(&mask_path).unwrap().inside, vec![false; 4]);
+    image::save_buffer(&mask_path, &[0; 8], 2, 2, image::ExtendedColorType::L16).unwrap();
     assert_error(
         Mask::read_png(&mask_path),
         "mask.png",
-        "mask must be an 8-bit grayscale PNG",
+        "a mask must have 8 bits per channel",
     );
 }
 

@@ -93,7 +93,7 @@ pub(crate) fn parse_lighting(method: &str) -> Result<LightingMethod> {
     }
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize)> {
+pub(crate) fn parse_size(s: &str) -> Result<(usize, usize)> {
     let bad = || {
         Error::invalid(
             "--env-size",
