@@ -323,13 +323,13 @@ pub struct BatchArgs {
     /// (paths absolute or relative to the manifest), optional "quality", "seed", "env_size".
     #[arg(long, required_unless_present = "merge", conflicts_with = "merge")]
     pub manifest: Option<PathBuf>,
-    /// Output folder: OUT/<id>/ per photo, OUT/summary-I-of-N.jsonl per shard.
+    /// Output folder: `OUT/<id>/` per photo, `OUT/summary-I-of-N.jsonl` per shard.
     #[arg(long, required_unless_present = "merge")]
     pub out: Option<PathBuf>,
     /// Take every N-th line starting at line I (0-based): I/N, e.g. $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.
     #[arg(long, default_value = "0/1")]
     pub shard: Shard,
-    /// Skip photos finished before (their OUT/<id>/ exists); failed ones run again.
+    /// Skip photos finished before (their `OUT/<id>/` exists); failed ones run again.
     #[arg(long)]
     pub resume: bool,
     /// Worker threads (default: all cores).

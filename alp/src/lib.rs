@@ -6,6 +6,33 @@
 //! folders written atomically, the probe catalogue, the declarative
 //! objective, the estimation, evaluation, virtual object insertion and the
 //! `alp` CLI.
+//!
+//! From a photo to its lighting, and an object set into it under that light:
+//!
+//! ```no_run
+//! use std::path::Path;
+//! use alp::estimate::{estimate, Photo, Quality, Settings};
+//! use alp::insert::{insert, Finish, InsertSettings, MaterialSpec, VirtualObject};
+//! use render::camera::Camera;
+//! use render::image_io::{Mask, RgbImage};
+//! use render::pose::Pose;
+//!
+//! # fn main() -> alp::Result<()> {
+//! let (image, _encoding) = RgbImage::read_photo("photo.exr")?;
+//! let camera = Camera::read("camera.json")?;
+//! let photo = Photo::new(image.clone(), Mask::read_png("mask.png")?, camera)?;
+//! let probe = alp::probes::load(Path::new("can"))?;
+//! let found = estimate(&photo, &probe, &Settings::new(Quality::Default))?;
+//! found.env.write("env.exr")?;
+//!
+//! let gold = MaterialSpec { finish: Finish::Metal, albedo: Some([1.0, 0.78, 0.34]), roughness: Some(0.15) };
+//! let object = VirtualObject::load(Path::new("sphere"), Some(&gold))?;
+//! let at = Pose::read("object_pose.json")?;
+//! let inserted = insert(&image, &found.env, &camera, &object, &at, &InsertSettings::default())?;
+//! inserted.image.write_exr("inserted.exr")?;
+//! # Ok(())
+//! # }
+//! ```
 
 pub mod acquire;
 pub mod batch;

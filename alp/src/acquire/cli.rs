@@ -15,7 +15,7 @@ use crate::estimate::cli::{parse_quality, progress_bar, thread_pool};
 /// Flags of `alp acquire`.
 #[derive(clap::Args, Debug)]
 pub struct AcquireArgs {
-    /// The capture folder: mesh.obj (with vt), lighting.exr and views/<name>/{image.exr, mask.png, camera.json}.
+    /// The capture folder: mesh.obj (with vt), lighting.exr and `views/<name>/{image.exr, mask.png, camera.json}`.
     #[arg(long)]
     pub captures: PathBuf,
     /// The probe folder to write (whole or not at all): probe.json, mesh.obj, albedo.exr,

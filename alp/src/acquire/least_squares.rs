@@ -3,13 +3,13 @@
 //! forward model and data term, inverted without a step size, in two parts
 //! that each fit what it can tell:
 //!
-//! 1. The roughness by search ([`super::roughness`]): every view rendered
+//! 1. The roughness by search (`roughness.rs`): every view rendered
 //!    at a ladder of roughnesses, each cell of a coarse grid taking the rung
 //!    that fits its pixels best. At every placement the scan might have (a
 //!    scan's two ends can cast the same outline); the one that fits best
 //!    goes on.
-//! 2. The albedo exactly ([`super::albedo`]): the views are affine in it
-//!    ([`super::observation`]), so its texels are a least-squares solve,
+//! 2. The albedo exactly (`albedo.rs`): the views are affine in it
+//!    (`observation.rs`), so its texels are a least-squares solve,
 //!    coarse to fine in texture size, with a smoothness prior that fills
 //!    what no view saw.
 //!

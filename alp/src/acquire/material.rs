@@ -13,7 +13,7 @@
 //! the albedo explain what both can). Bounds keep every texel in range.
 //! Coarse to fine: each level doubles the texture's size and starts from
 //! the last one's textures. Texels no view saw well take their
-//! neighbours' values ([`fill`]) and are marked in the coverage texture.
+//! neighbours' values (`fill`) and are marked in the coverage texture.
 
 use std::time::Instant;
 

@@ -123,7 +123,7 @@ pub struct LightingSolve {
     pub floor_of_level: f64,
     /// A texel that a clipped pixel reads most strongly, and whose data
     /// curvature comes more than this share from clipped pixels, is free
-    /// of the prior ([`clipped_lights`]; 1: none is).
+    /// of the prior (`clipped_lights`; 1: none is).
     pub clipped_light_share: f64,
     /// L-BFGS iterations at most.
     pub max_iters: usize,
