@@ -36,8 +36,8 @@ const PROBE: &str = "can";
 
 /// Samples per pixel of the photo, and of the insertions.
 const RENDER_SPP: u32 = 64;
-/// Samples per pixel of the relit spheres (a square): the shiny sphere's
-/// noise floor about 0.5 degrees, at a quarter of the evaluation's time.
+/// Samples per pixel of the relit spheres (a square): a quarter of the
+/// evaluation's (`relight::DEFAULT_SPP`), for the demo's time.
 const RELIGHT_SPP: u32 = 256;
 /// The inserted sphere: beside the can (metres, in the can's ground plane),
 /// white diffuse.

@@ -307,10 +307,12 @@ pub fn insert(
     if settings.spp == 0 {
         return Err(Error::invalid("spp", "needs at least one sample per pixel"));
     }
-    let ground_y = match settings.ground {
-        Ground::None => None,
-        Ground::Auto => Some(object.asset.mesh.posed(pose).bounds().0.y),
-        Ground::Height(y) => Some(y),
+    // The object in the world, for the ground's rays (none without a ground).
+    let posed = (settings.ground != Ground::None).then(|| PosedObject::new(object, pose));
+    let ground_y = match (settings.ground, &posed) {
+        (Ground::Auto, Some(posed)) => Some(posed.mesh.bounds().0.y),
+        (Ground::Height(y), _) => Some(y),
+        _ => None,
     };
     if let Some(y) = ground_y
         && camera.origin.y <= y
@@ -328,9 +330,9 @@ pub fn insert(
         seed: settings.seed,
     };
     let (layer, coverage) = render_layer(&object.asset, pose, camera, env, object.finish.bsdf(), &render_settings);
-    let shadow = match ground_y {
-        Some(y) => ground_ratios(env, &PosedObject::new(object, pose), camera, y, settings),
-        None => vec![[1.0; 3]; camera.pixel_count()],
+    let shadow = match (ground_y, &posed) {
+        (Some(y), Some(posed)) => ground_ratios(env, posed, camera, y, settings),
+        _ => vec![[1.0; 3]; camera.pixel_count()],
     };
     let pixels = (0..camera.pixel_count())
         .map(|p| {
