@@ -271,8 +271,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     if mask.count() == 0 {
         eprintln!("alp: warning: the probe is not visible from this camera; the image is black");
     }
-    image.write_exr(&args.out)?;
-    image.write_png_preview(preview_path(&args.out), 0.0)?;
+    alp::output::write_image_and_preview(&args.out, &image)?;
     if let Some(path) = &args.mask_out {
         mask.write_png(path)?;
     }
@@ -288,8 +287,7 @@ fn relight(args: &RelightArgs) -> Result<()> {
     };
     let spheres = alp::relight::relight(&env, &camera, &settings)?;
     let image = spheres.side_by_side();
-    image.write_exr(&args.out)?;
-    Ok(image.write_png_preview(preview_path(&args.out), 0.0)?)
+    alp::output::write_image_and_preview(&args.out, &image)
 }
 
 fn eval(args: &EvalArgs) -> Result<()> {
@@ -359,11 +357,6 @@ fn demo(out: &Path) -> Result<()> {
     println!("  estimate/  env.exr, pose.json, confidence.exr, rerender.exr, report.json");
     println!("  report.json, and the figures as PNG");
     Ok(())
-}
-
-/// `image.exr` -> `image.png`.
-fn preview_path(out: &Path) -> PathBuf {
-    out.with_extension("png")
 }
 
 fn make_probe(kind: &str, out: &Path) -> Result<()> {

@@ -90,6 +90,16 @@ pub fn write_files_atomically(files: Vec<FileWriter<'_>>) -> Result<()> {
     outcome
 }
 
+/// Writes `image` to `out` (linear EXR) and its tone-mapped preview beside
+/// it (`out` with the extension `png`), both or neither.
+pub fn write_image_and_preview(out: &Path, image: &render::image_io::RgbImage) -> Result<()> {
+    let png = out.with_extension("png");
+    write_files_atomically(vec![
+        (out, Box::new(|p| Ok(image.write_exr(p)?))),
+        (&png, Box::new(|p| Ok(image.write_png_preview(p, 0.0)?))),
+    ])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,7 +8,7 @@ use render::pose::Pose;
 
 use super::{Finish, Ground, InsertSettings, MaterialSpec, VirtualObject, insert};
 use crate::error::{Error, Result};
-use crate::output::write_files_atomically;
+use crate::output::write_image_and_preview;
 
 /// Flags of `alp insert`.
 #[derive(clap::Args, Debug)]
@@ -126,10 +126,5 @@ pub fn run(args: &InsertArgs) -> Result<()> {
             "alp: warning: the object is not in the camera's view at this pose; the photo is unchanged but for its shadow"
         );
     }
-    let image = &insertion.image;
-    let png = args.out.with_extension("png");
-    write_files_atomically(vec![
-        (&args.out, Box::new(|p| Ok(image.write_exr(p)?))),
-        (&png, Box::new(|p| Ok(image.write_png_preview(p, 0.0)?))),
-    ])
+    write_image_and_preview(&args.out, &insertion.image)
 }
