@@ -1,9 +1,9 @@
 //! The main job end to end on a small synthetic photo: it must find the
 //! probe where it is and explain the photo; bad inputs are clear errors.
 
-use alp::estimate::{Photo, Quality, Settings, estimate};
+use alp::estimate::{Photo, ProbeBsdf, Quality, Settings, estimate, estimate_with};
 use glam::{Quat, Vec3};
-use render::bsdf::GgxMetal;
+use render::bsdf::{Bsdf, GgxMetal, Lambertian};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::Mask;
@@ -19,8 +19,14 @@ fn photo_of(probe: &render::probe::ProbeAsset, truth: &Pose, eye: Vec3, target: 
 }
 
 /// [`photo_of`] at `width x height`.
-fn photo_sized(
+fn photo_sized(probe: &render::probe::ProbeAsset, truth: &Pose, eye: Vec3, target: Vec3, size: (u32, u32)) -> Photo {
+    photo_in(probe, &GgxMetal, truth, eye, target, size)
+}
+
+/// [`photo_sized`] of a probe whose reflectance `bsdf` models.
+fn photo_in(
     probe: &render::probe::ProbeAsset,
+    bsdf: &dyn Bsdf<f32>,
     truth: &Pose,
     eye: Vec3,
     target: Vec3,
@@ -29,14 +35,7 @@ fn photo_sized(
     let camera = Camera::new(width, height, 40.0, eye, target, Vec3::Y).expect("camera");
     let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/courtyard.exr");
     let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
-    let (image, mask) = render_image(
-        probe,
-        truth,
-        &camera,
-        &env,
-        &GgxMetal,
-        &RenderSettings { spp: 16, seed: 1 },
-    );
+    let (image, mask) = render_image(probe, truth, &camera, &env, bsdf, &RenderSettings { spp: 16, seed: 1 });
     Photo::new(image, mask, camera).expect("a valid photo")
 }
 
@@ -309,6 +308,33 @@ fn the_lighting_alone_at_the_true_pose_explains_the_photo() {
     assert!(result.report.lean.is_none(), "a known pose is not leaned");
     let psnr = result.report.psnr_db;
     assert!(psnr > 20.0, "re-render PSNR at the true pose: {psnr} dB");
+}
+
+#[test]
+fn the_estimate_renders_the_probe_with_the_model_it_is_given() {
+    // A can of the paper's metal and one of a diffuse (Lambertian) paint:
+    // each photo is explained best by its own model, whatever map the
+    // other solves for.
+    let (probe, truth, metal_photo, mut settings) = scene();
+    let diffuse_photo = photo_in(
+        &probe,
+        &Lambertian,
+        &truth,
+        Vec3::new(0.0, 0.12, 0.3),
+        Vec3::new(0.0, 0.06, 0.0),
+        (160, 120),
+    );
+    settings.known_pose = Some(truth);
+    let psnr = |photo: &Photo, bsdf: &dyn ProbeBsdf, name: &str| {
+        let result = estimate_with(photo, &probe, bsdf, &settings, &mut |_, _, _| {}).expect("an estimate");
+        assert_eq!(result.report.bsdf, name, "the report names the model");
+        result.report.psnr_db
+    };
+    let metal = [&metal_photo, &diffuse_photo].map(|photo| psnr(photo, &GgxMetal, "ggx_metal"));
+    let diffuse = [&metal_photo, &diffuse_photo].map(|photo| psnr(photo, &Lambertian, "lambertian"));
+    eprintln!("re-render PSNR (dB), metal / diffuse photo: metal model {metal:?}, diffuse model {diffuse:?}");
+    assert!(metal[0] > diffuse[0] + 6.0, "the metal photo");
+    assert!(diffuse[1] > metal[1] + 1.0, "the diffuse photo");
 }
 
 #[test]

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use autodiff::Tape;
 
-use crate::bsdf::GgxMetal;
+use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::envmap::direction_to_uv;
 use crate::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
@@ -111,9 +111,11 @@ impl SampleRecord {
     /// stratified set and seed; a pass's samples are dropped from the tape
     /// before the next), on the pixels `keep` keeps. The first pass's pixels
     /// are the data; later passes' samples join their pixels. An error when
-    /// the probe leaves the view.
+    /// the probe leaves the view. `bsdf` is the probe's reflectance model.
+    #[allow(clippy::too_many_arguments)]
     pub fn trace(
         asset: &ProbeAsset,
+        bsdf: &dyn Bsdf<f32>,
         pose: &Pose,
         camera: &Camera,
         settings: &RenderSettings,
@@ -157,7 +159,7 @@ impl SampleRecord {
                 &vars,
                 &posed,
                 &asset.mesh.triangles,
-                &GgxMetal,
+                bsdf,
                 sampling,
             );
             let d = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));

@@ -917,8 +917,9 @@ fn a_traced_record_s_transport_renders_the_probe_as_the_renderer_does() {
     let sampler = EnvSampler::new(&env);
     let sampling = LightSampling::mis(&sampler).with_interreflection();
     let settings = RenderSettings { spp: 128, seed: 3 };
-    let record = render::transport::SampleRecord::trace(&probe, &pose, &camera, &settings, &sampling, 2, |_| true)
-        .expect("a record");
+    let record =
+        render::transport::SampleRecord::trace(&probe, &GgxMetal, &pose, &camera, &settings, &sampling, 2, |_| true)
+            .expect("a record");
     let transport = record.transport(env.width(), env.height());
     let texels: Vec<f64> = env.radiance().iter().flatten().map(|&v| v as f64).collect();
     let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use render::RenderError;
+use render::bsdf::GgxMetal;
 use render::camera::Camera;
 use render::image_io::{Mask, PhotoEncoding, RgbImage};
 use render::pose::Pose;
@@ -13,7 +14,7 @@ use crate::error::{Error, Result};
 
 use super::lighting::LightingMethod;
 use super::settings::ADAM_LIGHTING;
-use super::{Estimate, Photo, Quality, Settings, estimate_with_progress};
+use super::{Estimate, Photo, Quality, Settings, estimate_with};
 use crate::objective::Objective;
 
 /// Flags of `alp estimate`.
@@ -134,7 +135,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     let verbose = std::io::stderr().is_terminal();
     let bar = progress_bar(verbose, "alp estimate {bar:30} {pos}/{len} phases, {elapsed} {msg}");
     let result = pool.install(|| {
-        estimate_with_progress(&photo, &probe, &settings, &mut |phase, done, expected| {
+        estimate_with(&photo, &probe, &GgxMetal, &settings, &mut |phase, done, expected| {
             bar.set_length(expected as u64);
             bar.set_position(done as u64);
             bar.set_message(phase.name.clone());

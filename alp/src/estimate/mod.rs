@@ -35,7 +35,7 @@ pub mod symmetry;
 use std::time::Instant;
 
 use glam::Vec3;
-use render::bsdf::GgxMetal;
+use render::bsdf::{Bsdf, GgxMetal};
 use render::integrator::{RenderSettings, render_image};
 use render::mesh::EdgeAdjacency;
 use render::probe::ProbeAsset;
@@ -55,9 +55,18 @@ use report::{PhaseLog, WorkingImage};
 
 use crate::error::{Error, Result};
 
+/// A reflectance model at both precisions the estimate works in: renders
+/// in f32, outline fits in f64. Every [`Bsdf`] written generically over
+/// [`autodiff::Real`] (as `render::bsdf`'s are) is one.
+pub trait ProbeBsdf: Bsdf<f32> + Bsdf<f64> {}
+
+impl<B: Bsdf<f32> + Bsdf<f64>> ProbeBsdf for B {}
+
 /// The probe's mesh, material and topology, prepared once.
 pub(super) struct Probe<'a> {
     pub(super) asset: &'a ProbeAsset,
+    /// Its reflectance model: what every render of it uses.
+    pub(super) bsdf: &'a dyn ProbeBsdf,
     pub(super) edges: EdgeAdjacency,
     /// Whether a turn about its axis changes its outline (`symmetry::turns_show`):
     /// each axis hypothesis is then fitted at several turns.
@@ -72,13 +81,14 @@ pub(super) struct Probe<'a> {
 }
 
 impl<'a> Probe<'a> {
-    /// `asset` (its axis along mesh +Y) prepared.
-    pub(super) fn new(asset: &'a ProbeAsset, symmetry: &SymmetrySettings) -> Self {
+    /// `asset` (its axis along mesh +Y) of reflectance `bsdf`, prepared.
+    pub(super) fn new(asset: &'a ProbeAsset, bsdf: &'a dyn ProbeBsdf, symmetry: &SymmetrySettings) -> Self {
         // The axis of revolution, found once for the three readings of it.
         let revolution = symmetry::axis_of_revolution(&asset.mesh, symmetry);
         let revolution = revolution.as_ref();
         Probe {
             asset,
+            bsdf,
             edges: EdgeAdjacency::new(&asset.mesh),
             turns_show: symmetry::turns_show_about(&asset.mesh, revolution, symmetry),
             alike_turned: symmetry::alike_turned_about(asset, revolution, symmetry),
@@ -87,18 +97,22 @@ impl<'a> Probe<'a> {
     }
 }
 
-/// Estimates the pose and the lighting from `photo` of `probe`.
+/// Estimates the pose and the lighting from `photo` of `probe`, a metal of
+/// the paper's reflectance model ([`GgxMetal`]).
 pub fn estimate(photo: &Photo, asset: &ProbeAsset, settings: &Settings) -> Result<Estimate> {
-    estimate_with_progress(photo, asset, settings, &mut |_, _, _| {})
+    estimate_with(photo, asset, &GgxMetal, settings, &mut |_, _, _| {})
 }
 
-/// [`estimate`], calling `on_phase(phase, done, expected)` as each phase
-/// ends: what a progress bar follows. `expected` starts at
-/// [`Settings::phase_count`] and grows as the run learns how many axis
-/// hypotheses and refits the photo needs.
-pub fn estimate_with_progress(
+/// [`estimate`] of a probe whose reflectance `bsdf` models (every render of
+/// it, in the outline fits, the light transport and the re-render, uses it),
+/// calling `on_phase(phase, done, expected)` as each phase ends: what a
+/// progress bar follows. `expected` starts at [`Settings::phase_count`] and
+/// grows as the run learns how many axis hypotheses and refits the photo
+/// needs.
+pub fn estimate_with(
     photo: &Photo,
     asset: &ProbeAsset,
+    bsdf: &dyn ProbeBsdf,
     settings: &Settings,
     on_phase: &mut dyn FnMut(&PhaseReport, usize, usize),
 ) -> Result<Estimate> {
@@ -112,7 +126,7 @@ pub fn estimate_with_progress(
     let (to_y, along_y) = symmetry::along_y(asset, &settings.symmetry);
     let asset = along_y.as_ref().unwrap_or(asset);
     let known_pose = settings.known_pose.map(|pose| symmetry::turned_to_y(&pose, to_y));
-    let probe = Probe::new(asset, &settings.symmetry);
+    let probe = Probe::new(asset, bsdf, &settings.symmetry);
     // The photo as the estimate works on it.
     let full = photo;
     let working = WorkingPhoto::new(full, &settings.photo)?;
@@ -165,12 +179,13 @@ pub fn estimate_with_progress(
                 spp: settings.photo.rerender_spp,
                 seed: settings.seed.wrapping_add(80),
             };
-            render_image(asset, &judged.pose, &full.camera, &map, &GgxMetal, &render).0
+            render_image(asset, &judged.pose, &full.camera, &map, bsdf, &render).0
         }
     };
     let (axes, starts, chosen_start) = searched.map(PoseSearch::into_accounts).unwrap_or_default();
     let report = Report {
         settings: settings.clone(),
+        bsdf: Bsdf::<f32>::name(bsdf),
         axes,
         starts,
         chosen_start,
@@ -217,7 +232,7 @@ mod testing {
     pub(super) fn probe_of(asset: &ProbeAsset) -> Probe<'_> {
         Probe {
             turns_show: false,
-            ..Probe::new(asset, &Settings::default().symmetry)
+            ..Probe::new(asset, &GgxMetal, &Settings::default().symmetry)
         }
     }
 

@@ -30,6 +30,8 @@ pub struct Estimate {
 pub struct Report {
     /// The settings used.
     pub settings: Settings,
+    /// The probe's reflectance model ([`render::bsdf::Bsdf::name`]).
+    pub bsdf: &'static str,
     /// Every axis hypothesis.
     pub axes: Vec<AxisReport>,
     /// Every start.

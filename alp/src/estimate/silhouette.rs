@@ -12,7 +12,6 @@ use autodiff::Tape;
 use glam::Quat;
 use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
-use render::bsdf::GgxMetal;
 use render::envmap::EnvMap;
 use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, light_samples};
 use render::lookup::ImageVars;
@@ -315,7 +314,7 @@ pub(super) fn fit_pose_to_image(
                 &vars,
                 &posed,
                 &ctx.probe.asset.mesh.triangles,
-                &GgxMetal,
+                ctx.probe.bsdf,
             )
             .radiance(&env_vars);
             let target: Vec<[f64; 3]> = hits

@@ -223,7 +223,7 @@ pub(super) fn fit_lighting(
         .max(1);
     let camera = &photo.camera;
     let keep = |p: u32| pixels.keeps(p, camera.width);
-    let record = SampleRecord::trace(probe.asset, pose, camera, settings, sampling, passes, keep)?;
+    let record = SampleRecord::trace(probe.asset, probe.bsdf, pose, camera, settings, sampling, passes, keep)?;
     let mut data = pixel_targets(photo, &record.hits, clipped, purpose)?;
     if purpose == LightingPurpose::Output {
         let r = &record;
