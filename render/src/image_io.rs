@@ -411,6 +411,14 @@ mod tests {
         std::fs::write(dir.join("f.png"), b"\x89PNG truncated").expect("broken");
         let error = RgbImage::read_photo(dir.join("f.png")).expect_err("broken").to_string();
         assert!(error.contains("f.png"), "{error}");
+        // Every format cut short: an error naming the file, not a panic or a part image.
+        for name in ["a.png", "a.jpg", "b.png", "c.hdr", "d.exr"] {
+            let bytes = std::fs::read(dir.join(name)).expect(name);
+            let cut = dir.join(format!("cut-{name}"));
+            std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("cut");
+            let error = RgbImage::read_photo(&cut).expect_err(name).to_string();
+            assert!(error.contains(&format!("cut-{name}")), "{error}");
+        }
         std::fs::remove_dir_all(&dir).expect("clean up");
     }
 
