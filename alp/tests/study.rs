@@ -129,6 +129,36 @@ fn a_study_writes_its_tables_and_chart_and_a_rerun_skips_what_it_has() {
     );
     let csv = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
     assert_eq!(csv.lines().count(), 1 + 3, "one scene's three settings: {csv}");
+
+    // --tables-only runs nothing and leaves results.jsonl as it is, even a
+    // last line still being written; a scene a setting has not run on yet
+    // is left out of the tables, with a note.
+    let rows: Vec<&str> = after.lines().collect();
+    let (last, kept) = rows.split_last().expect("rows");
+    let scene_of_last = ["can_1", "can_2"]
+        .into_iter()
+        .find(|s| last.contains(&format!("\"scene\":\"{s}\"")))
+        .expect("a scene");
+    let partial = kept.join("\n") + "\n" + &last[..20];
+    std::fs::write(out.join("results.jsonl"), &partial).expect("write");
+    std::fs::remove_file(out.join("summary.md")).expect("remove");
+    let run = study(&scenes, &out, &["--families", "threads,lighting", "--tables-only"]);
+    assert!(run.status.success(), "tables: {}", String::from_utf8_lossy(&run.stderr));
+    assert_eq!(
+        std::fs::read_to_string(out.join("results.jsonl")).expect("jsonl"),
+        partial,
+        "--tables-only changed results.jsonl"
+    );
+    let summary = std::fs::read_to_string(out.join("summary.md")).expect("summary");
+    assert!(
+        summary.contains("| lighting | lighting=adam | 1 |")
+            && summary.contains("1 of the 2 scenes left out")
+            && summary.contains(scene_of_last),
+        "{summary}"
+    );
+    let e = study(&scenes, &dir.join("nothing"), &["--tables-only"]);
+    let stderr = String::from_utf8_lossy(&e.stderr);
+    assert!(!e.status.success() && stderr.contains("results.jsonl"), "{stderr}");
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
 

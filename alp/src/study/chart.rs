@@ -1,14 +1,21 @@
 //! The studies' SVG charts (plotters): one panel per relit sphere.
 
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::error::{Error, Result};
 use crate::relight::Sphere;
 
 use super::summary::{StabilitySummary, VariantSummary};
 
-/// Chart size, pixels: three panels side by side.
+/// Chart size, pixels: three panels side by side, and the legend.
 const SIZE: (u32, u32) = (1500, 520);
+
+/// The legend's width at the chart's right, pixels.
+const LEGEND_WIDTH: u32 = 190;
+
+/// The Pareto front's colour.
+const FRONT_GREY: RGBColor = RGBColor(150, 150, 150);
 
 /// The series' colours, in family order: one per perturbation of the
 /// stability study, no two alike.
@@ -33,6 +40,62 @@ fn drawing(e: impl std::fmt::Display) -> Error {
     Error::invalid("chart", format!("drawing failed: {e}"))
 }
 
+/// A line of the legend: its label and how its sample is drawn.
+struct Entry {
+    label: String,
+    colour: RGBColor,
+    width: u32,
+    dashed: bool,
+}
+
+impl Entry {
+    fn line(label: &str, colour: RGBColor) -> Self {
+        Entry {
+            label: label.into(),
+            colour,
+            width: 2,
+            dashed: false,
+        }
+    }
+}
+
+/// One legend for the panels, in its own strip: it hides no data.
+fn draw_legend(area: &DrawingArea<SVGBackend, plotters::coord::Shift>, entries: &[Entry]) -> Result<()> {
+    const ROW: i32 = 20;
+    for (i, e) in entries.iter().enumerate() {
+        let y = 60 + ROW * i as i32;
+        let style = e.colour.stroke_width(e.width);
+        let segments: &[(i32, i32)] = match e.dashed {
+            true => &[(0, 9), (14, 24)],
+            false => &[(0, 24)],
+        };
+        for &(a, b) in segments {
+            area.draw(&PathElement::new(vec![(8 + a, y), (8 + b, y)], style))
+                .map_err(drawing)?;
+        }
+        area.draw(&Text::new(e.label.clone(), (40, y - 7), ("sans-serif", 13)))
+            .map_err(drawing)?;
+    }
+    Ok(())
+}
+
+/// The 1-2-5 values of each decade from `lo` to `hi`: a log axis's labels
+/// (plotters labels a log axis from its first power of ten on).
+fn one_two_five(lo: f64, hi: f64) -> Vec<f64> {
+    let first = lo.log10().floor() as i32;
+    let last = hi.log10().ceil() as i32;
+    (first..=last)
+        .flat_map(|e| [1.0, 2.0, 5.0].map(|m| m * 10f64.powi(e)))
+        .filter(|v| (lo..=hi).contains(v))
+        .collect()
+}
+
+/// Whether a label at pixel `p` keeps clear of those at `placed` (a label
+/// is about 90 x 12 pixels).
+fn clear_of(p: (i32, i32), placed: &[(i32, i32)]) -> bool {
+    placed.iter().all(|q| (p.0 - q.0).abs() > 90 || (p.1 - q.1).abs() > 12)
+}
+
 /// Mean angular error against median wall time per image, a panel per
 /// sphere: one series per knob family (its settings and the default one,
 /// in order of time; the families in `apart` without the default: they
@@ -54,11 +117,24 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
         true => (t_lo / 1.3, t_hi * 1.3),
         false => (0.1, 10.0),
     };
+    let mut legend = vec![Entry {
+        dashed: true,
+        width: 5,
+        ..Entry::line("Pareto front", FRONT_GREY)
+    }];
+    legend.extend(
+        families
+            .iter()
+            .enumerate()
+            .map(|(i, f)| Entry::line(f, PALETTE[i % PALETTE.len()])),
+    );
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(drawing)?;
-        for (k, panel) in root.split_evenly((1, 3)).iter().enumerate() {
+        let (panels, key) = root.split_horizontally(SIZE.0 - LEGEND_WIDTH);
+        draw_legend(&key, &legend)?;
+        for (k, panel) in panels.split_evenly((1, 3)).iter().enumerate() {
             let point = |s: &VariantSummary| (s.median_wall_s.max(t_lo), s.angular_deg[k]);
             let errors: Vec<f64> = summaries
                 .iter()
@@ -75,19 +151,23 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
                 .map_err(drawing)?;
             chart
                 .configure_mesh()
+                .x_labels(30)
+                .x_label_formatter(&|_| String::new())
                 .x_desc("median wall time per image (s)")
                 .y_desc("mean angular error (deg)")
                 .draw()
                 .map_err(drawing)?;
             // The front first, wide and grey: the families' lines run over it.
-            let mut front: Vec<(f64, f64)> = summaries.iter().filter(|s| s.pareto[k]).map(point).collect();
-            front.sort_by(|a, b| a.0.total_cmp(&b.0));
-            let grey = RGBColor(150, 150, 150);
+            let mut front: Vec<&VariantSummary> = summaries.iter().filter(|s| s.pareto[k]).collect();
+            front.sort_by(|a, b| a.median_wall_s.total_cmp(&b.median_wall_s));
             chart
-                .draw_series(DashedLineSeries::new(front, 8, 5, grey.stroke_width(5)))
-                .map_err(drawing)?
-                .label("Pareto front")
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(5)));
+                .draw_series(DashedLineSeries::new(
+                    front.iter().map(|s| point(s)),
+                    8,
+                    5,
+                    FRONT_GREY.stroke_width(5),
+                ))
+                .map_err(drawing)?;
             for (i, family) in families.iter().enumerate() {
                 let colour = PALETTE[i % PALETTE.len()];
                 let mut members: Vec<(f64, f64)> = summaries
@@ -99,13 +179,36 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
                 members.sort_by(|a, b| a.0.total_cmp(&b.0));
                 chart
                     .draw_series(LineSeries::new(members.clone(), colour.stroke_width(2)))
-                    .map_err(drawing)?
-                    .label(*family)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+                    .map_err(drawing)?;
                 chart
                     .draw_series(members.iter().map(|&p| Circle::new(p, 4, colour.filled())))
                     .map_err(drawing)?;
             }
+            let area = chart.plotting_area();
+            for v in one_two_five(t_lo, t_hi) {
+                let (x, y) = area.map_coordinate(&(v, 0.0));
+                root.draw(&PathElement::new(vec![(x, y), (x, y + 5)], BLACK))
+                    .map_err(drawing)?;
+                let style = TextStyle::from(("sans-serif", 12)).pos(Pos::new(HPos::Center, VPos::Top));
+                root.draw(&Text::new(format!("{v}"), (x, y + 7), style))
+                    .map_err(drawing)?;
+            }
+            // The front's settings by name where there is room (the default's first).
+            // Labels sit 3 px below their point; the default's 16 px above and 9 right of it.
+            let mut placed: Vec<(i32, i32)> = default
+                .map(|d| area.map_coordinate(&point(d)))
+                .into_iter()
+                .flat_map(|(x, y)| [(x, y), (x + 9, y - 19)])
+                .collect();
+            let mut named = Vec::new();
+            for s in front.iter().filter(|s| s.variant != default_variant) {
+                let at = area.map_coordinate(&point(s));
+                if clear_of(at, &placed) {
+                    placed.push(at);
+                    named.push(EmptyElement::at(point(s)) + Text::new(s.variant.clone(), (6, 3), ("sans-serif", 11)));
+                }
+            }
+            chart.draw_series(named).map_err(drawing)?;
             if let Some(d) = default.filter(|d| d.angular_deg[k].is_finite()) {
                 chart
                     .draw_series([EmptyElement::at(point(d))
@@ -113,13 +216,6 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
                         + Text::new("default", (9, -16), ("sans-serif", 14))])
                     .map_err(drawing)?;
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(drawing)?;
         }
         root.present().map_err(drawing)?;
     }
@@ -138,11 +234,18 @@ pub fn stability_svg(summaries: &[StabilitySummary]) -> Result<String> {
         }
     }
     let top_level = summaries.iter().map(|s| s.level).max().unwrap_or(1).max(1);
+    let legend: Vec<Entry> = families
+        .iter()
+        .enumerate()
+        .map(|(i, f)| Entry::line(f, PALETTE[i % PALETTE.len()]))
+        .collect();
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(drawing)?;
-        for (k, panel) in root.split_evenly((1, 3)).iter().enumerate() {
+        let (panels, key) = root.split_horizontally(SIZE.0 - LEGEND_WIDTH);
+        draw_legend(&key, &legend)?;
+        for (k, panel) in panels.split_evenly((1, 3)).iter().enumerate() {
             let e_hi = summaries
                 .iter()
                 .map(|s| s.median_deg[k])
@@ -180,21 +283,11 @@ pub fn stability_svg(summaries: &[StabilitySummary]) -> Result<String> {
                 let style = colour.stroke_width(2);
                 chart
                     .draw_series(LineSeries::new(points.clone(), style))
-                    .map_err(drawing)?
-                    .label(*family)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                    .map_err(drawing)?;
                 chart
                     .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
                     .map_err(drawing)?;
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 11))
-                .draw()
-                .map_err(drawing)?;
         }
         root.present().map_err(drawing)?;
     }
@@ -218,6 +311,13 @@ mod tests {
             peak_mb: None,
             pareto: [pareto; 3],
         }
+    }
+
+    #[test]
+    fn a_log_axis_is_labelled_at_one_two_five() {
+        assert_eq!(one_two_five(1.5, 52.0), [2.0, 5.0, 10.0, 20.0, 50.0]);
+        assert_eq!(one_two_five(0.3, 1.0), [0.5, 1.0]);
+        assert!(clear_of((0, 0), &[(91, 0), (0, 13)]) && !clear_of((0, 0), &[(50, 5)]));
     }
 
     #[test]
@@ -279,9 +379,16 @@ mod tests {
             "threads",
             "Pareto front",
             "default",
+            // The front's settings by name, the time axis labelled 1-2-5 (1.5 s to 52 s).
+            ">\nquality=fast\n<",
+            ">\nquality=best\n<",
+            ">\n2\n<",
+            ">\n5\n<",
+            ">\n50\n<",
         ] {
             assert!(svg.contains(text), "no `{text}` in the chart");
         }
+        assert!(!svg.contains(">\nthreads=1\n<"), "a setting off the front is named");
         // The quality family's line through fast, default and best in each
         // of the three panels (its legend's sample has two points).
         let polylines_of = |colour: RGBColor, points: usize| {

@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 use crate::estimate::cli::progress_bar;
 use crate::relight::RelightSettings;
 
-use super::record::{Results, write_atomically};
+use super::record::{Results, Row, write_atomically};
 use super::{DEFAULT, Method, RunContext, chart, mitsuba_available, speed_accuracy, stability, summary};
 
 /// The studies.
@@ -42,6 +42,11 @@ pub struct StudyArgs {
     /// Samples per pixel of the relit spheres that score each run, a square.
     #[arg(long, default_value_t = 256)]
     pub eval_spp: u32,
+    /// Run nothing: write the tables and the chart from the rows
+    /// results.jsonl holds (its newest build's, on the scenes every setting
+    /// has run), e.g. while the study runs, or to redraw them.
+    #[arg(long)]
+    pub tables_only: bool,
 }
 
 /// Flags of `alp study stability` (tables stability.csv, stability.md; chart stability.svg).
@@ -98,22 +103,62 @@ fn checked(&StudyArgs { threads, eval_spp, .. }: &StudyArgs) -> Result<RelightSe
 }
 
 /// Every scene under `dirs` under every variant, with a progress bar on a
-/// terminal; `results.csv` written.
-fn run_all(study: &StudyArgs, variants: &[super::Variant], context: &RunContext) -> Result<Results> {
+/// terminal (with `--tables-only`, the rows run so far); `results.csv`
+/// written. The rows a table sums up (`Results::complete`), and a note of
+/// the scenes it leaves out.
+fn run_all(study: &StudyArgs, variants: &[super::Variant], context: &RunContext) -> Result<(Vec<Row>, Option<String>)> {
     let scenes = super::scenes::find(&study.scenes)?;
+    let results = match study.tables_only {
+        true => super::collect(&scenes, &study.out)?,
+        false => run_with_progress(&scenes, variants, &study.out, context)?,
+    };
+    results.write_csv()?;
+    let ids: Vec<&str> = variants.iter().map(|v| v.id.as_str()).collect();
+    let (rows, left_out) = results.complete(&super::scene_names(&scenes), &ids);
+    if rows.is_empty() {
+        return Err(Error::invalid(
+            "--tables-only",
+            format!("no scene under {} has run under every setting yet", study.out.display()),
+        ));
+    }
+    let note = (!left_out.is_empty()).then(|| {
+        let named = match left_out.len() {
+            ..=NAMED => left_out.join(", "),
+            n => format!("{}, and {} more", left_out[..NAMED].join(", "), n - NAMED),
+        };
+        format!(
+            "{} of the {} scenes left out: not every setting has run on them yet ({named}).",
+            left_out.len(),
+            scenes.len(),
+        )
+    });
+    if let Some(note) = &note {
+        eprintln!("alp study: {note}");
+    }
+    Ok((rows, note))
+}
+
+/// How many scenes a note names.
+const NAMED: usize = 4;
+
+/// [`super::run`] with a progress bar on a terminal.
+fn run_with_progress(
+    scenes: &[PathBuf],
+    variants: &[super::Variant],
+    out: &Path,
+    context: &RunContext,
+) -> Result<Results> {
     let bar = progress_bar(
         std::io::stderr().is_terminal(),
         "alp study {bar:30} {pos}/{len} runs, {elapsed} (eta {eta}) {msg}",
     );
-    let results = super::run(&scenes, variants, &study.out, context, &mut |done, total, what| {
+    let results = super::run(scenes, variants, out, context, &mut |done, total, what| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
         bar.set_message(what.to_string());
     });
     bar.finish_and_clear();
-    let results = results?;
-    results.write_csv()?;
-    Ok(results)
+    results
 }
 
 fn stability_run(args: &StabilityArgs) -> Result<()> {
@@ -128,14 +173,19 @@ fn stability_run(args: &StabilityArgs) -> Result<()> {
         eval,
         mitsuba_python: None,
     };
-    let results = run_all(study, &variants, &context)?;
-    let summaries = summary::summarize_stability(&results.rows);
+    let (rows, left_out) = run_all(study, &variants, &context)?;
+    let summaries = summary::summarize_stability(&rows);
     write_atomically(&out.join("stability.csv"), &summary::stability_csv(&summaries))?;
-    let table = summary::stability_markdown(&summaries);
+    let table = summary::stability_markdown(&summaries) + &notes(left_out.as_slice());
     write_atomically(&out.join("stability.md"), &table)?;
     write_atomically(&out.join("stability.svg"), &chart::stability_svg(&summaries)?)?;
-    finished(&table, results.rows.len(), &out.join("stability.svg"));
+    finished(&table, rows.len(), &out.join("stability.svg"));
     Ok(())
+}
+
+/// Notes below a Markdown table, a paragraph each.
+fn notes(notes: &[String]) -> String {
+    notes.iter().map(|n| format!("\n{n}\n")).collect()
 }
 
 /// Prints the table and where the chart is.
@@ -154,7 +204,8 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
     let mut variants = speed_accuracy::sweep(&families, study.threads)?;
     let mut notes = Vec::new();
     let wants_mitsuba = variants.iter().any(|v| matches!(v.method, Method::MitsubaAdam { .. }));
-    let mitsuba_python = match wants_mitsuba.then(|| mitsuba_available(&args.mitsuba_python)) {
+    let check_mitsuba = wants_mitsuba && !study.tables_only;
+    let mitsuba_python = match check_mitsuba.then(|| mitsuba_available(&args.mitsuba_python)) {
         Some(Ok(())) => Some(args.mitsuba_python.clone()),
         Some(Err(why)) => {
             let note = format!(
@@ -169,15 +220,13 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         None => None,
     };
     let context = RunContext { eval, mitsuba_python };
-    let results = run_all(study, &variants, &context)?;
-    let summaries = summary::summarize(&results.rows, &speed_accuracy::APART);
+    let (rows, left_out) = run_all(study, &variants, &context)?;
+    notes.extend(left_out);
+    let summaries = summary::summarize(&rows, &speed_accuracy::APART);
     write_atomically(&out.join("summary.csv"), &summary::to_csv(&summaries))?;
-    let mut table = summary::to_markdown(&summaries);
-    for note in &notes {
-        table += &format!("\n{note}\n");
-    }
+    let table = summary::to_markdown(&summaries) + &self::notes(&notes);
     write_atomically(&out.join("summary.md"), &table)?;
-    let groups = summary::by_probe(&results.rows, &speed_accuracy::MODELLING, DEFAULT);
+    let groups = summary::by_probe(&rows, &speed_accuracy::MODELLING, DEFAULT);
     if !groups.is_empty() {
         write_atomically(&out.join("model.csv"), &summary::by_probe_csv(&groups))?;
         write_atomically(&out.join("model.md"), &summary::by_probe_markdown(&groups))?;
@@ -186,6 +235,6 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         &out.join("speed_accuracy.svg"),
         &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART)?,
     )?;
-    finished(&table, results.rows.len(), &out.join("speed_accuracy.svg"));
+    finished(&table, rows.len(), &out.join("speed_accuracy.svg"));
     Ok(())
 }

@@ -186,13 +186,36 @@ pub fn run(
         }
     }
     progress(done, total, "");
-    // The tables cover the scenes asked for, every setting on the same ones.
-    let names: Vec<String> = scene_dirs
+    Ok(of_scenes(results, scene_dirs))
+}
+
+/// The rows `out/results.jsonl` holds (the newest build's) on `scene_dirs`,
+/// running nothing: a study's tables while it runs, or redrawn after.
+pub fn collect(scene_dirs: &[PathBuf], out: &Path) -> Result<Results> {
+    let results = Results::read_newest(out)?;
+    if results.other_builds > 0 {
+        eprintln!(
+            "alp study: {} rows of {} left out: another build of alp ran them",
+            results.other_builds,
+            out.join("results.jsonl").display()
+        );
+    }
+    Ok(of_scenes(results, scene_dirs))
+}
+
+/// `results` on the scenes asked for only.
+fn of_scenes(mut results: Results, scene_dirs: &[PathBuf]) -> Results {
+    let names = scene_names(scene_dirs);
+    results.rows.retain(|r| names.contains(&r.scene));
+    results
+}
+
+/// The scenes' names: their folders'.
+pub fn scene_names(scene_dirs: &[PathBuf]) -> Vec<String> {
+    scene_dirs
         .iter()
         .filter_map(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .collect();
-    results.rows.retain(|r| names.contains(&r.scene));
-    Ok(results)
+        .collect()
 }
 
 /// What a run found: the map, the pose when it searched for one, and what

@@ -187,42 +187,62 @@ impl Results {
     pub fn open(dir: &Path, build: &str) -> Result<Self> {
         std::fs::create_dir_all(dir).map_err(|e| RenderError::io(dir, "create folder", e))?;
         let path = dir.join("results.jsonl");
-        let mut rows = Vec::new();
-        if path.is_file() {
-            let text = std::fs::read_to_string(&path).map_err(|e| RenderError::io(&path, "read", e))?;
-            let lines: Vec<&str> = text.lines().collect();
-            for (i, line) in lines.iter().enumerate() {
-                if line.trim().is_empty() {
-                    continue;
-                }
-                match serde_json::from_str::<Row>(line) {
-                    Ok(row) => rows.push(row),
-                    Err(_) if i + 1 == lines.len() && !text.ends_with('\n') => {
-                        eprintln!(
-                            "alp: warning: {}: line {} was cut short; that run is redone",
-                            path.display(),
-                            i + 1
-                        );
-                        // The whole lines kept as they were: the cut one must not prefix the next row.
-                        let whole = text.rfind('\n').map_or(0, |end| end + 1);
-                        write_atomically(&path, &text[..whole])?;
-                    }
-                    Err(e) => {
-                        return Err(RenderError::file(&path, format!("line {} is not a study row: {e}", i + 1)).into());
-                    }
-                }
-            }
+        let rows = match path.is_file() {
+            true => read_rows(&path, true)?,
+            false => Vec::new(),
+        };
+        Ok(Self::of_build(path, rows, build))
+    }
+
+    /// The rows of the newest build (the last row's) in `dir/results.jsonl`,
+    /// read only: a study may be appending to it (a last line cut short is
+    /// left out, not repaired). What a study's tables are made from while it
+    /// runs, or redrawn from after.
+    pub fn read_newest(dir: &Path) -> Result<Self> {
+        let path = dir.join("results.jsonl");
+        if !path.is_file() {
+            return Err(RenderError::file(&path, "is missing: the study has not run here").into());
         }
+        let rows = read_rows(&path, false)?;
+        let build = rows.last().map(|r| r.build.clone()).unwrap_or_default();
+        Ok(Self::of_build(path, rows, &build))
+    }
+
+    fn of_build(path: PathBuf, mut rows: Vec<Row>, build: &str) -> Self {
         let before = rows.len();
         rows.retain(|r| r.build == build);
         let done = rows.iter().map(|r| (r.scene.clone(), r.variant.clone())).collect();
-        Ok(Results {
+        Results {
             path,
             other_builds: before - rows.len(),
             rows,
             build: build.to_string(),
             done,
-        })
+        }
+    }
+
+    /// The rows a table sums up: those of the `variants` asked for that ran
+    /// on some scene, on the `scenes` where every one of them ran (every
+    /// setting on the same scenes); and the scenes left out for a run
+    /// missing.
+    pub fn complete(&self, scenes: &[String], variants: &[&str]) -> (Vec<Row>, Vec<String>) {
+        let ran: BTreeSet<&str> = self
+            .rows
+            .iter()
+            .map(|r| r.variant.as_str())
+            .filter(|v| variants.contains(v))
+            .collect();
+        let (whole, partial): (Vec<&str>, Vec<&str>) = scenes
+            .iter()
+            .map(String::as_str)
+            .partition(|scene| !ran.is_empty() && ran.iter().all(|v| self.has(scene, v)));
+        let rows = self
+            .rows
+            .iter()
+            .filter(|r| ran.contains(r.variant.as_str()) && whole.contains(&r.scene.as_str()))
+            .cloned()
+            .collect();
+        (rows, partial.into_iter().map(String::from).collect())
     }
 
     /// Whether `scene` has run under `variant`.
@@ -259,6 +279,41 @@ impl Results {
         }
         write_atomically(&self.path.with_file_name("results.csv"), &text)
     }
+}
+
+/// The rows of `path`. A last line cut short (a run killed, or still
+/// writing it) is left out with a warning, and with `repair` cut from the
+/// file (its run is then redone); any other line that is not a row is an
+/// error naming the file and line.
+fn read_rows(path: &Path, repair: bool) -> Result<Vec<Row>> {
+    let text = std::fs::read_to_string(path).map_err(|e| RenderError::io(path, "read", e))?;
+    let lines: Vec<&str> = text.lines().collect();
+    let mut rows = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        match serde_json::from_str::<Row>(line) {
+            Ok(row) => rows.push(row),
+            Err(_) if i + 1 == lines.len() && !text.ends_with('\n') => {
+                eprintln!(
+                    "alp: warning: {}: line {} was cut short{}",
+                    path.display(),
+                    i + 1,
+                    if repair { "; that run is redone" } else { "; left out" }
+                );
+                if repair {
+                    // The whole lines kept as they were: the cut one must not prefix the next row.
+                    let whole = text.rfind('\n').map_or(0, |end| end + 1);
+                    write_atomically(path, &text[..whole])?;
+                }
+            }
+            Err(e) => {
+                return Err(RenderError::file(path, format!("line {} is not a study row: {e}", i + 1)).into());
+            }
+        }
+    }
+    Ok(rows)
 }
 
 /// Writes `text` to `path` whole or not at all (a temporary sibling renamed into place).
