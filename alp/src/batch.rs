@@ -124,6 +124,9 @@ pub fn run(
     mut progress: impl FnMut(&Outcome),
 ) -> Result<Vec<Outcome>> {
     let text = std::fs::read_to_string(manifest).map_err(|e| RenderError::io(manifest, "read manifest", e))?;
+    if text.trim().is_empty() {
+        return Err(RenderError::file(manifest, "lists no photos (one JSON object a line)").into());
+    }
     let base = manifest.parent().map_or_else(|| PathBuf::from("."), Path::to_path_buf);
     std::fs::create_dir_all(out).map_err(|e| RenderError::io(out, "create folder", e))?;
     let summary_path = out.join(options.shard.summary_name());

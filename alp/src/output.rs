@@ -1,7 +1,9 @@
 //! Outputs are written whole or not at all: everything goes to a temporary
 //! sibling (folder or files) renamed into place at the end, so a failed or
 //! interrupted run never leaves a half-written output (and never destroys the
-//! one a previous run left).
+//! one a previous run left). An existing output folder is replaced only when
+//! it holds nothing but what the new output holds: a folder of the user's
+//! own files is refused, not swept away.
 
 use std::path::{Path, PathBuf};
 
@@ -18,13 +20,16 @@ pub fn write_folder_atomically(out: &Path, write: impl FnOnce(&Path) -> Result<(
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
+    if out.exists() && !out.is_dir() {
+        return Err(RenderError::file(out, "exists and is not a folder: the output is a folder").into());
+    }
     std::fs::create_dir_all(&parent).map_err(|e| RenderError::io(&parent, "create folder", e))?;
     let tmp = parent.join(format!(".{}.partial-{}", name.to_string_lossy(), std::process::id()));
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(|e| RenderError::io(&tmp, "remove stale temporary folder", e))?;
     }
     std::fs::create_dir(&tmp).map_err(|e| RenderError::io(&tmp, "create folder", e))?;
-    if let Err(e) = write(&tmp) {
+    if let Err(e) = write(&tmp).and_then(|()| check_replaceable(out, &tmp)) {
         let _ = std::fs::remove_dir_all(&tmp);
         return Err(e);
     }
@@ -35,6 +40,28 @@ pub fn write_folder_atomically(out: &Path, write: impl FnOnce(&Path) -> Result<(
         std::fs::remove_dir_all(&old).map_err(|e| RenderError::io(&old, "remove the previous output", e))?;
     } else {
         std::fs::rename(&tmp, out).map_err(|e| RenderError::io(out, "move the new output into place", e))?;
+    }
+    Ok(())
+}
+
+/// An existing `out` is replaced only when it holds nothing but entries
+/// the new output (`new`) has too, as a previous run's output does: a
+/// folder of the user's own files is never swept away.
+fn check_replaceable(out: &Path, new: &Path) -> Result<()> {
+    if !out.is_dir() {
+        return Ok(());
+    }
+    let entries = std::fs::read_dir(out).map_err(|e| RenderError::io(out, "list", e))?;
+    for entry in entries {
+        let entry = entry.map_err(|e| RenderError::io(out, "list", e))?;
+        if !new.join(entry.file_name()).exists() {
+            return Err(RenderError::file(
+                &entry.path(),
+                "is not one of this output's files: an existing folder is replaced only when it holds \
+                 nothing else (choose another output folder, or move it away)",
+            )
+            .into());
+        }
     }
     Ok(())
 }
@@ -120,11 +147,26 @@ mod tests {
         assert_eq!(std::fs::read_to_string(out.join("a.txt")).expect("kept"), "first");
         let leftovers = std::fs::read_dir(&base).expect("base").count();
         assert_eq!(leftovers, 1, "no temporary folder is left behind");
-        write_folder_atomically(&out, |dir| {
-            std::fs::write(dir.join("b.txt"), "third").map_err(|e| RenderError::io(dir, "write", e).into())
-        })
-        .expect("replace");
-        assert!(!out.join("a.txt").exists() && out.join("b.txt").exists());
+        let write_both = |dir: &Path| {
+            for name in ["a.txt", "b.txt"] {
+                std::fs::write(dir.join(name), "third").map_err(|e| RenderError::io(dir, "write", e))?;
+            }
+            Ok(())
+        };
+        write_folder_atomically(&out, write_both).expect("replace");
+        assert_eq!(std::fs::read_to_string(out.join("a.txt")).expect("a"), "third");
+        // A folder holding anything the new output lacks is the user's: kept, and named.
+        std::fs::write(out.join("photo.jpg"), "mine").expect("user's file");
+        let refused = write_folder_atomically(&out, write_both).expect_err("a foreign file");
+        assert!(refused.to_string().contains("photo.jpg"), "{refused}");
+        assert!(out.join("photo.jpg").exists() && out.join("a.txt").exists());
+        assert_eq!(std::fs::read_dir(&base).expect("base").count(), 1, "no temporary left");
+        // A file where the folder should go is refused before any work.
+        let file = base.join("file");
+        std::fs::write(&file, "mine").expect("file");
+        let refused = write_folder_atomically(&file, |_| panic!("ran")).expect_err("a file");
+        assert!(refused.to_string().contains("not a folder"), "{refused}");
+        assert_eq!(std::fs::read_to_string(&file).expect("kept"), "mine");
         std::fs::remove_dir_all(&base).expect("clean up");
     }
 

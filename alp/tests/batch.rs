@@ -191,5 +191,19 @@ fn shards_resume_and_broken_lines() {
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("2/2"));
     let bad = alp(&["batch", "--merge", s(&dir.join("s0"))]);
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("summary"));
+    // A manifest that lists nothing, or is not text, is named; no folder is made.
+    let (empty, garbage) = (dir.join("empty.jsonl"), dir.join("garbage.jsonl"));
+    std::fs::write(&empty, "\n \n").expect("empty");
+    std::fs::write(&garbage, [0xff, 0xfe, 0x00, 0x9f]).expect("garbage");
+    for (manifest, rule) in [(&empty, "no photos"), (&garbage, "UTF-8")] {
+        let nothing = dir.join("nothing");
+        let bad = alp(&["batch", "--manifest", s(manifest), "--out", s(&nothing)]);
+        let stderr = String::from_utf8_lossy(&bad.stderr);
+        assert!(
+            !bad.status.success() && stderr.contains(s(manifest)) && stderr.contains(rule),
+            "{stderr}"
+        );
+        assert!(!nothing.exists(), "{rule}: an output folder was made");
+    }
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
