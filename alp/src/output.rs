@@ -56,7 +56,7 @@ fn check_replaceable(out: &Path, new: &Path) -> Result<()> {
         let entry = entry.map_err(|e| RenderError::io(out, "list", e))?;
         if !new.join(entry.file_name()).exists() {
             return Err(RenderError::file(
-                &entry.path(),
+                entry.path(),
                 "is not one of this output's files: an existing folder is replaced only when it holds \
                  nothing else (choose another output folder, or move it away)",
             )
