@@ -117,8 +117,8 @@ fn run_all(study: &StudyArgs, variants: &[super::Variant], context: &RunContext)
     let (rows, left_out) = results.complete(&super::scene_names(&scenes), &ids);
     if rows.is_empty() {
         return Err(Error::invalid(
-            "--tables-only",
-            format!("no scene under {} has run under every setting yet", study.out.display()),
+            "--out",
+            format!("no scene in {} has run under every setting yet", study.out.display()),
         ));
     }
     let note = (!left_out.is_empty()).then(|| {

@@ -167,10 +167,7 @@ pub fn run(
     let total = scene_dirs.len() * variants.len();
     let mut done = 0;
     for dir in scene_dirs {
-        let name = dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
+        let name = scene_name(dir);
         let todo: Vec<&Variant> = variants.iter().filter(|v| !results.has(&name, &v.id)).collect();
         done += variants.len() - todo.len();
         if todo.is_empty() {
@@ -210,12 +207,16 @@ fn of_scenes(mut results: Results, scene_dirs: &[PathBuf]) -> Results {
     results
 }
 
-/// The scenes' names: their folders'.
+/// A scene's name: its folder's.
+fn scene_name(dir: &Path) -> String {
+    dir.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The scenes' names.
 pub fn scene_names(scene_dirs: &[PathBuf]) -> Vec<String> {
-    scene_dirs
-        .iter()
-        .filter_map(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .collect()
+    scene_dirs.iter().map(|d| scene_name(d)).collect()
 }
 
 /// What a run found: the map, the pose when it searched for one, and what
