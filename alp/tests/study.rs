@@ -73,6 +73,7 @@ fn a_study_writes_its_tables_and_chart_and_a_rerun_skips_what_it_has() {
         "results.csv",
         "summary.csv",
         "summary.md",
+        "paired.md",
         "speed_accuracy.svg",
     ] {
         assert!(out.join(file).is_file(), "no {file}");
@@ -95,6 +96,13 @@ fn a_study_writes_its_tables_and_chart_and_a_rerun_skips_what_it_has() {
     assert_eq!(variants, ["default", "threads=1", "default", "threads=1"]);
     let summary = std::fs::read_to_string(out.join("summary.md")).expect("summary");
     assert!(summary.contains("| threads | threads=1 | 2 |"), "{summary}");
+    // Outputs do not depend on the threads: no change on either scene.
+    let paired = std::fs::read_to_string(out.join("paired.md")).expect("paired");
+    assert!(
+        paired.contains("against `default`")
+            && paired.contains("| threads | threads=1 | 2 | +0.00 +- 0.00 / +0.00 +- 0.00 / +0.00 +- 0.00 |"),
+        "{paired}"
+    );
     assert!(
         summary.contains("outside method") && summary.contains("skipped"),
         "{summary}"
@@ -213,6 +221,7 @@ fn the_stability_study_perturbs_grades_and_never_panics_or_goes_non_finite() {
         "results.csv",
         "stability.csv",
         "stability.md",
+        "paired.md",
         "stability.svg",
     ] {
         assert!(out.join(file).is_file(), "no {file}");
@@ -254,6 +263,11 @@ fn the_stability_study_perturbs_grades_and_never_panics_or_goes_non_finite() {
     assert!(
         table.contains("| noise | noise=0.1 | 1 |") && table.contains("| one_start | one_start | 1 |"),
         "{table}"
+    );
+    let paired = std::fs::read_to_string(out.join("paired.md")).expect("paired");
+    assert!(
+        paired.contains("against `unperturbed`") && paired.contains("| noise | noise=0.1 | 1 | "),
+        "{paired}"
     );
     let svg = std::fs::read_to_string(out.join("stability.svg")).expect("svg");
     assert!(svg.starts_with("<svg") && svg.contains("one_start") && svg.contains("noise"));

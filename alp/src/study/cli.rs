@@ -8,7 +8,7 @@ use crate::estimate::cli::progress_bar;
 use crate::relight::RelightSettings;
 
 use super::record::{Results, Row, write_atomically};
-use super::{DEFAULT, Method, RunContext, chart, mitsuba_available, speed_accuracy, stability, summary};
+use super::{DEFAULT, Method, RunContext, chart, mitsuba_available, paired, speed_accuracy, stability, summary};
 
 /// The studies.
 #[derive(clap::Subcommand, Debug)]
@@ -49,7 +49,9 @@ pub struct StudyArgs {
     pub tables_only: bool,
 }
 
-/// Flags of `alp study stability` (tables stability.csv, stability.md; chart stability.svg).
+/// Flags of `alp study stability` (tables stability.csv, stability.md, and
+/// each perturbation against the photo unperturbed, paired.csv, paired.md;
+/// chart stability.svg).
 #[derive(clap::Args, Debug)]
 pub struct StabilityArgs {
     #[command(flatten)]
@@ -62,8 +64,9 @@ pub struct StabilityArgs {
     pub perturbations: Option<Vec<String>>,
 }
 
-/// Flags of `alp study speed-accuracy` (tables summary.csv, summary.md, and
-/// per probe family model.csv, model.md; chart speed_accuracy.svg).
+/// Flags of `alp study speed-accuracy` (tables summary.csv, summary.md, per
+/// probe family model.csv, model.md, and each setting against the default
+/// scene by scene, paired.csv, paired.md; chart speed_accuracy.svg).
 #[derive(clap::Args, Debug)]
 pub struct SpeedAccuracyArgs {
     #[command(flatten)]
@@ -179,8 +182,16 @@ fn stability_run(args: &StabilityArgs) -> Result<()> {
     let table = summary::stability_markdown(&summaries) + &notes(left_out.as_slice());
     write_atomically(&out.join("stability.md"), &table)?;
     write_atomically(&out.join("stability.svg"), &chart::stability_svg(&summaries)?)?;
+    write_paired(out, &rows, stability::UNPERTURBED)?;
     finished(&table, rows.len(), &out.join("stability.svg"));
     Ok(())
+}
+
+/// `paired.csv` and `paired.md`: every setting against `reference`, scene by scene.
+fn write_paired(out: &Path, rows: &[Row], reference: &str) -> Result<()> {
+    let all = paired::paired(rows, reference);
+    write_atomically(&out.join("paired.csv"), &paired::to_csv(&all))?;
+    write_atomically(&out.join("paired.md"), &paired::to_markdown(&all, reference))
 }
 
 /// Notes below a Markdown table, a paragraph each.
@@ -231,6 +242,7 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         write_atomically(&out.join("model.csv"), &summary::by_probe_csv(&groups))?;
         write_atomically(&out.join("model.md"), &summary::by_probe_markdown(&groups))?;
     }
+    write_paired(out, &rows, DEFAULT)?;
     write_atomically(
         &out.join("speed_accuracy.svg"),
         &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART)?,

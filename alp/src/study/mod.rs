@@ -3,8 +3,9 @@
 //! settings ([`Variant`]s), scores each run as `alp eval` does (the three
 //! relit spheres' angular errors, the pose's errors) and times it, keeps the
 //! rows in `results.jsonl` as they finish (a rerun skips them), and writes
-//! `results.csv`, a summary per setting (`summary.csv`, `summary.md`) and an
-//! SVG chart.
+//! `results.csv`, a summary per setting (`summary.csv`, `summary.md`), each
+//! setting paired scene by scene against the reference ([`paired`]:
+//! `paired.csv`, `paired.md`) and an SVG chart.
 //!
 //! - [`speed_accuracy`]: the knobs that trade time for accuracy.
 //! - [`stability`]: what breaks methods ([`perturb`]), at graded strengths,
@@ -12,6 +13,7 @@
 
 pub mod chart;
 pub mod cli;
+pub mod paired;
 pub mod perturb;
 pub mod record;
 pub mod scenes;

@@ -26,8 +26,12 @@ pub const PERTURBATIONS: [&str; 14] = [
     "no_pose_priors",
     "no_light_smoothness",
     "joint_rounds",
-    "unperturbed",
+    UNPERTURBED,
 ];
+
+/// The photo as it is under the default settings: every line's level 0,
+/// and what each perturbation is paired against.
+pub const UNPERTURBED: &str = "unperturbed";
 
 /// Seed of the added noise (the same on every scene and run).
 const NOISE_SEED: u64 = 7;
@@ -83,7 +87,7 @@ pub fn variants(name: &str, threads: usize) -> Result<Vec<Variant>> {
         ..Variant::estimate(name, name.to_string(), threads, move |s, pose| apply(s, pose))
     };
     Ok(match name {
-        "unperturbed" => vec![Variant {
+        UNPERTURBED => vec![Variant {
             perturbation: Some(Perturbation {
                 level: 0,
                 strength: 0.0,
@@ -112,8 +116,8 @@ pub fn variants(name: &str, threads: usize) -> Result<Vec<Variant>> {
 
 /// The photo as it is, then every variant of `names`.
 pub fn sweep(names: &[String], threads: usize) -> Result<Vec<Variant>> {
-    let mut all = variants("unperturbed", threads)?;
-    for name in names.iter().filter(|n| *n != "unperturbed") {
+    let mut all = variants(UNPERTURBED, threads)?;
+    for name in names.iter().filter(|n| *n != UNPERTURBED) {
         all.extend(variants(name, threads)?);
     }
     Ok(all)
