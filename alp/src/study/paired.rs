@@ -8,6 +8,7 @@
 use crate::relight::Sphere;
 
 use super::record::{Row, csv_text};
+use super::summary::median;
 
 /// How many standard errors a mean change must exceed to be called past
 /// the noise of the scene set (about 95 % two-sided).
@@ -86,15 +87,6 @@ pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
             })
         })
         .collect()
-}
-
-/// The median of sorted `values` (NaN for none).
-fn median(values: &[f64]) -> f64 {
-    match values.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => values[n / 2],
-        n => 0.5 * (values[n / 2 - 1] + values[n / 2]),
-    }
 }
 
 /// The paired changes as CSV.

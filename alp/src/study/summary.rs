@@ -51,11 +51,7 @@ pub fn summarize(rows: &[Row], apart: &[&str]) -> Vec<VariantSummary> {
                 std::array::from_fn(|k| errors.iter().map(|e| e[k]).sum::<f64>() / errors.len().max(1) as f64);
             let mut walls: Vec<f64> = runs.iter().map(|r| r.wall_s).collect();
             walls.sort_by(f64::total_cmp);
-            let median_wall_s = match walls.len() {
-                0 => 0.0,
-                n if n % 2 == 1 => walls[n / 2],
-                n => 0.5 * (walls[n / 2 - 1] + walls[n / 2]),
-            };
+            let median_wall_s = if walls.is_empty() { 0.0 } else { median(&walls) };
             VariantSummary {
                 family: runs[0].family.clone(),
                 variant: variant.to_string(),
@@ -246,6 +242,15 @@ pub struct StabilitySummary {
     pub median_deg: [f64; 3],
     /// 90th percentile (nearest rank) per sphere, degrees.
     pub p90_deg: [f64; 3],
+}
+
+/// The median of sorted `values` (NaN for none).
+pub(super) fn median(values: &[f64]) -> f64 {
+    match values.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => values[n / 2],
+        n => 0.5 * (values[n / 2 - 1] + values[n / 2]),
+    }
 }
 
 /// The `q` quantile of `values` by nearest rank (NaN for none).
