@@ -42,9 +42,9 @@ impl Paired {
 /// Every setting of `rows` but `reference`, in the order first run, paired
 /// with `reference` on each scene; settings sharing no scene are left out.
 pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
-    let scored = |variant: &str, scene: &str| {
-        rows.iter()
-            .find(|r| r.variant == variant && r.scene == scene)
+    let reference_on = |scene: &str| {
+        (rows.iter())
+            .find(|r| r.variant == reference && r.scene == scene)
             .and_then(|r| Some((r.angular()?, r.wall_s)))
     };
     let mut order: Vec<&Row> = Vec::new();
@@ -59,9 +59,8 @@ pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
             let pairs: Vec<([f64; 3], f64)> = (rows.iter())
                 .filter(|r| r.variant == first.variant)
                 .filter_map(|r| {
-                    let ((ours, wall), (theirs, reference_wall)) =
-                        (scored(&r.variant, &r.scene)?, scored(reference, &r.scene)?);
-                    Some((std::array::from_fn(|k| ours[k] - theirs[k]), wall / reference_wall))
+                    let (ours, (theirs, reference_wall)) = (r.angular()?, reference_on(&r.scene)?);
+                    Some((std::array::from_fn(|k| ours[k] - theirs[k]), r.wall_s / reference_wall))
                 })
                 .collect();
             let n = pairs.len();
