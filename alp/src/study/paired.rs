@@ -8,7 +8,7 @@
 use crate::relight::Sphere;
 
 use super::record::{Row, csv_text};
-use super::summary::median;
+use super::summary::{first_seen, median};
 
 /// How many standard errors a mean change must exceed to be called past
 /// the noise of the scene set (about 95 % two-sided).
@@ -47,17 +47,11 @@ pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
             .find(|r| r.variant == reference && r.scene == scene)
             .and_then(|r| Some((r.angular()?, r.wall_s)))
     };
-    let mut order: Vec<&Row> = Vec::new();
-    for row in rows.iter().filter(|r| r.variant != reference) {
-        if !order.iter().any(|r| r.variant == row.variant) {
-            order.push(row);
-        }
-    }
-    order
+    first_seen(rows.iter().filter(|r| r.variant != reference), |r| &r.variant)
         .into_iter()
-        .filter_map(|first| {
-            let pairs: Vec<([f64; 3], f64)> = (rows.iter())
-                .filter(|r| r.variant == first.variant)
+        .filter_map(|variant| {
+            let runs: Vec<&Row> = rows.iter().filter(|r| r.variant == variant).collect();
+            let pairs: Vec<([f64; 3], f64)> = (runs.iter())
                 .filter_map(|r| {
                     let (ours, (theirs, reference_wall)) = (r.angular()?, reference_on(&r.scene)?);
                     Some((std::array::from_fn(|k| ours[k] - theirs[k]), r.wall_s / reference_wall))
@@ -76,8 +70,8 @@ pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
                 let mut ratios: Vec<f64> = pairs.iter().map(|p| p.1).filter(|r| r.is_finite()).collect();
                 ratios.sort_by(f64::total_cmp);
                 Paired {
-                    family: first.family.clone(),
-                    variant: first.variant.clone(),
+                    family: runs[0].family.clone(),
+                    variant: variant.to_string(),
                     scenes: n,
                     mean_deg,
                     stderr_deg,

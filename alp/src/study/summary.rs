@@ -36,12 +36,7 @@ pub struct VariantSummary {
 /// Pareto front is drawn among the families not in `apart` (those given
 /// what the others search for, the true pose, solve an easier problem).
 pub fn summarize(rows: &[Row], apart: &[&str]) -> Vec<VariantSummary> {
-    let mut order: Vec<&str> = Vec::new();
-    for row in rows {
-        if !order.contains(&row.variant.as_str()) {
-            order.push(&row.variant);
-        }
-    }
+    let order = first_seen(rows, |r| &r.variant);
     let mut summaries: Vec<VariantSummary> = order
         .iter()
         .map(|&variant| {
@@ -152,13 +147,7 @@ pub fn to_markdown(summaries: &[VariantSummary]) -> String {
 /// family (each row's `probe`), probe families in the order first run:
 /// what a modelling choice buys on which probe. No front is drawn.
 pub fn by_probe(rows: &[Row], families: &[&str], default: &str) -> Vec<(String, Vec<VariantSummary>)> {
-    let mut probes: Vec<&str> = Vec::new();
-    for row in rows {
-        if !probes.contains(&row.probe.as_str()) {
-            probes.push(&row.probe);
-        }
-    }
-    probes
+    first_seen(rows, |r| &r.probe)
         .into_iter()
         .map(|probe| {
             let kept: Vec<Row> = (rows.iter())
@@ -244,6 +233,18 @@ pub struct StabilitySummary {
     pub p90_deg: [f64; 3],
 }
 
+/// The distinct values of `key` over `rows`, in the order first seen.
+pub(super) fn first_seen<'a>(rows: impl IntoIterator<Item = &'a Row>, key: fn(&Row) -> &str) -> Vec<&'a str> {
+    let mut seen: Vec<&str> = Vec::new();
+    for row in rows {
+        let value = key(row);
+        if !seen.contains(&value) {
+            seen.push(value);
+        }
+    }
+    seen
+}
+
 /// The median of sorted `values` (NaN for none).
 pub(super) fn median(values: &[f64]) -> f64 {
     match values.len() {
@@ -265,12 +266,7 @@ fn quantile(values: &mut [f64], q: f64) -> f64 {
 
 /// The stability summaries of `rows`, one per variant in the order first run.
 pub fn summarize_stability(rows: &[Row]) -> Vec<StabilitySummary> {
-    let mut order: Vec<&str> = Vec::new();
-    for row in rows {
-        if !order.contains(&row.variant.as_str()) {
-            order.push(&row.variant);
-        }
-    }
+    let order = first_seen(rows, |r| &r.variant);
     order
         .iter()
         .map(|&variant| {
