@@ -2,7 +2,7 @@
 drawn from fixed seeds and path-traced by Mitsuba 3, for `tools/benchmark.py` to run `alp
 estimate` on. Constants and choices of the estimate are tuned on train only; test is reported.
 
-    python3 tools/bench_scenes.py --out DIR [--train 48] [--test 48] [--spp 512]
+    python3 tools/bench_scenes.py --out DIR --alp target/release/alp [--train 48] [--test 48] [--spp 512]
 
 makes DIR/train/NNN_<family>_<pose>_<lighting>/ and DIR/test/..., each holding image.exr,
 mask.png, camera.json, pose.json, gt_env.exr, probe.txt ("probe"), the probe folder probe/ and
@@ -22,6 +22,14 @@ Each scene draws, from its own seed:
 - the sensor: no noise (30 %) or multiplicative Gaussian noise of 0.5 to 3 %, and a clip at
   the 98th to 99.5th percentile of the probe's brightest channel in 20 % of the scenes.
 
+Beside the exact photo and mask, each scene holds the inputs people have of it, drawn from the
+scene's seed by `alp synth inputs` (alp/src/study/inputs.rs): a mask traced by hand
+(mask_traced.png: the outline 2 px out to 2 px in, varying along it), a segmenter's mask
+(mask_segmenter.png: a pixel wider, corners rounded), the photo blurred by 0.5 to 2 px
+(image_blur.exr), written as an 8-bit sRGB JPEG (image.jpg: quality 80 to 95, exposed so 0.5 to 3 %
+of the probe clips), and a box round the probe (box.txt, 2 to 10 px margins); inputs.json says
+what was drawn. `tools/benchmark.py --inputs` runs on them.
+
 The photo is Mitsuba's `path` integrator (max depth 4: shadows and inter-reflections) with our
 BRDF (tools/mitsuba_scenes.py), the environment behind the probe composited by the coverage of
 that render (emitters hidden: the film's alpha is the probe's coverage of each pixel, from all
@@ -35,6 +43,7 @@ import json
 import math
 import os
 import shutil
+import subprocess
 import sys
 import time
 
@@ -191,6 +200,12 @@ def make_scene(mi, split, index, folder, spp, sources):
     return meta
 
 
+def people_inputs(alp, folder, seed):
+    """The scene's inputs as people have them (`alp synth inputs`), unless they are there."""
+    if not os.path.isfile(os.path.join(folder, "inputs.json")):
+        subprocess.run([alp, "synth", "inputs", "--scene", folder, "--seed", str(seed)], check=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, help="benchmark folder: train/ and test/ go here")
@@ -200,6 +215,7 @@ def main():
     ap.add_argument("--envmaps", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "assets", "envmaps"))
     ap.add_argument("--variant", default="llvm_ad_rgb", choices=["scalar_rgb", "llvm_ad_rgb"])
     ap.add_argument("--preview", action="store_true", help="also write preview.png (tone-mapped photo) per scene")
+    ap.add_argument("--alp", required=True, help="the alp binary (draws each scene's inputs as people have them)")
     args = ap.parse_args()
     mi = am.setup_variant(args.variant)
     sources = {n: am.read_exr(os.path.join(args.envmaps, n + ".exr")) for s in BUNDLED.values() for n in s}
@@ -212,8 +228,10 @@ def main():
             meta_path = os.path.join(folder, "scene.json")
             made = am.read_json(meta_path) if os.path.isfile(meta_path) else {}
             if made.get("mitsuba_spp") == args.spp and made.get("version") == VERSION:
+                people_inputs(args.alp, folder, made["seed"])
                 continue
             meta = make_scene(mi, split, index, folder, args.spp, sources)
+            people_inputs(args.alp, folder, meta["seed"])
             if args.preview:
                 img = am.read_exr(os.path.join(folder, "image.exr"))
                 am.write_png(os.path.join(folder, "preview.png"), am.tonemap(img, 0.6 / max(np.median(img), 1e-6)))

@@ -4,13 +4,18 @@ train and test splits, scored by `alp eval`, summarized per split, probe family 
 with the train-test gap. Python 3 standard library only.
 
     python3 tools/benchmark.py --alp target/release/alp --bench DIR [--splits train,test]
-        [--quality default] [--threads 2] [--out DIR/results/default] [--only SUBSTR,...]
+        [--quality default] [--inputs exact] [--threads 2] [--out DIR/results/default] [--only SUBSTR,...]
 
 Writes OUT/results.jsonl (one line per scene: scene.json's draw, `alp eval`'s fields, success,
 wall_s, cpu_s, max_rss_mb) and OUT/summary.md, and prints the summary. A rerun with the same
 binary keeps the lines it already has (delete results.jsonl to start over), so an interrupted
 run resumes; lines of scenes outside the run (another split) stay, and the summary covers every
 scene the same binary has run there. Tune on train; report test.
+
+`--inputs` picks the photo and mask each estimate is given (bench_scenes.py draws them): `exact`
+(image.exr, mask.png: the renderer's coverage), `traced` (mask_traced.png), `segmenter`
+(mask_segmenter.png), `blur` (image_blur.exr), `jpeg` (image.jpg), `box` (box.txt instead of a
+mask).
 
 A pose is found when the observable part of it is within 5 degrees: the rotation for a probe
 whose label breaks its symmetry ("full"), the axis direction for one symmetric about its axis
@@ -28,6 +33,10 @@ import time
 import eval_suite as es
 
 SUCCESS_DEG = 5.0
+# Per --inputs: the photo, and the mask (or, for `box`, the box file), of each scene.
+INPUTS = {"exact": ("image.exr", "mask.png"), "traced": ("image.exr", "mask_traced.png"),
+          "segmenter": ("image.exr", "mask_segmenter.png"), "blur": ("image_blur.exr", "mask.png"),
+          "jpeg": ("image.jpg", "mask.png"), "box": ("image.exr", "box.txt")}
 POSE_KINDS = ("upright", "tilted", "lying")
 
 
@@ -58,9 +67,18 @@ def run_scene(args, split, scene_dir, cache):
            "probe_px": meta["camera"]["probe_px"], "elevation_deg": meta["camera"]["elevation_deg"],
            "noise": meta["noise"], "exposure_clip": meta["exposure_clip"], "quality": args.quality,
            "threads": args.threads, "alp_sha256": args.alp_sha[:12], "known_pose": args.known_pose,
+           "inputs": args.inputs,
            "load_1m": round(os.getloadavg()[0], 2)}
-    cmd = [args.alp, "estimate", "--image", os.path.join(scene_dir, "image.exr"),
-           "--mask", os.path.join(scene_dir, "mask.png"), "--camera", os.path.join(scene_dir, "camera.json"),
+    image, mask = INPUTS[args.inputs]
+    if not os.path.isfile(os.path.join(scene_dir, image)) or not os.path.isfile(os.path.join(scene_dir, mask)):
+        sys.exit("%s: no %s or %s (make them with tools/bench_scenes.py --alp)" % (scene_dir, image, mask))
+    if args.inputs == "box":
+        with open(os.path.join(scene_dir, mask)) as f:
+            region = ["--box", f.read().strip()]
+    else:
+        region = ["--mask", os.path.join(scene_dir, mask)]
+    cmd = [args.alp, "estimate", "--image", os.path.join(scene_dir, image)] + region + [
+           "--camera", os.path.join(scene_dir, "camera.json"),
            "--probe", os.path.join(scene_dir, "probe"), "--out", est_dir, "--quality", args.quality,
            "--threads", str(args.threads), "--seed", "0"]
     if args.known_pose:
@@ -129,6 +147,8 @@ def main():
     ap.add_argument("--bench", required=True, help="the benchmark folder (train/, test/) of bench_scenes.py")
     ap.add_argument("--splits", default="train,test")
     ap.add_argument("--quality", default="default")
+    ap.add_argument("--inputs", default="exact", choices=sorted(INPUTS),
+                    help="the photo and mask as given: exact, or as people have them")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", default=None, help="results folder (default BENCH/results/QUALITY)")
     ap.add_argument("--only", default="", help="keep scenes whose name contains one of these (comma-separated)")
@@ -138,7 +158,8 @@ def main():
     args = ap.parse_args()
     es.RSS_VIA = "auto"
     args.alp = os.path.abspath(args.alp)
-    args.out = os.path.abspath(args.out or os.path.join(args.bench, "results", args.quality))
+    suffix = "" if args.inputs == "exact" else "-" + args.inputs
+    args.out = os.path.abspath(args.out or os.path.join(args.bench, "results", args.quality + suffix))
     args.alp_sha = es.sha256_files([args.alp], "")
     os.makedirs(args.out, exist_ok=True)
     cmdline = " ".join(["python3", "tools/benchmark.py"] + sys.argv[1:])
@@ -147,8 +168,8 @@ def main():
     if os.path.exists(results):
         with open(results) as f:
             existing = [json.loads(line) for line in f if line.strip()]
-    same_run = lambda r: (r["alp_sha256"], r["quality"], r.get("known_pose", False)) == (
-        args.alp_sha[:12], args.quality, args.known_pose)
+    same_run = lambda r: (r["alp_sha256"], r["quality"], r.get("known_pose", False), r.get("inputs", "exact")) == (
+        args.alp_sha[:12], args.quality, args.known_pose, args.inputs)
     kept = {(r["split"], r["scene"]): r for r in existing if same_run(r)}
     cache_path = os.path.join(args.out, "eval_cache.json")
     cache = json.load(open(cache_path)) if os.path.exists(cache_path) else {}

@@ -238,7 +238,7 @@ fn estimate_one(entry: &Entry, base: &Path, dir: &Path) -> Result<f64> {
         settings.env_size = parse_size(size)?;
     }
     let image_path = path(&entry.image);
-    let image = read_photo(&image_path)?;
+    let (image, encoding) = read_photo(&image_path)?;
     let mask = Mask::read_png(path(&entry.mask))?;
     let camera = Camera::read(path(&entry.camera))?;
     let probe_path = path(&entry.probe);
@@ -248,7 +248,9 @@ fn estimate_one(entry: &Entry, base: &Path, dir: &Path) -> Result<f64> {
     } else {
         crate::probes::load(&entry.probe)?
     };
-    let photo = Photo::new(image, mask, camera).map_err(|e| e.in_file(&image_path))?;
+    let photo = Photo::new(image, mask, camera)
+        .map_err(|e| e.in_file(&image_path))?
+        .with_encoding(encoding);
     let result = estimate(&photo, &probe, &settings)?;
     crate::output::write_folder_atomically(dir, |tmp| write_estimate(tmp, &photo.image, &result))?;
     Ok(result.report.psnr_db)

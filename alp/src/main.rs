@@ -142,6 +142,21 @@ enum SynthWhat {
     /// round it standing at the origin, as on a turntable; the mesh written in a random frame and
     /// scale, its true mesh-to-world pose in true_pose.json.
     Captures(CaptureArgs),
+    /// Write beside a scene's exact photo and mask the inputs people have of it: a mask traced
+    /// by hand (mask_traced.png), a segmenter's (mask_segmenter.png), the photo blurred
+    /// (image_blur.exr), as an 8-bit JPEG (image.jpg), a box round the probe (box.txt), and
+    /// what was drawn (inputs.json).
+    Inputs(InputsArgs),
+}
+
+#[derive(clap::Args)]
+struct InputsArgs {
+    /// Scene folder: image.exr, mask.png (exact) and camera.json; the inputs are written into it.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Seed of every draw.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 #[derive(clap::Args)]
@@ -237,6 +252,10 @@ fn main() -> ExitCode {
             what: Some(SynthWhat::Captures(args)),
             ..
         }) => synth_captures(&args),
+        Command::Synth(SynthCommand {
+            what: Some(SynthWhat::Inputs(args)),
+            ..
+        }) => synth_inputs(&args),
         Command::Synth(SynthCommand { scene: Some(args), .. }) => synth(&args),
         Command::Synth(_) => Err(Error::invalid(
             "alp synth",
@@ -323,6 +342,16 @@ fn synth(args: &SynthArgs) -> Result<()> {
     }
     let reference = alp::synth::probe_reference(&args.probe, &args.out)?;
     alp::synth::write_scene(&args.out, &scene, &env, &reference)
+}
+
+fn synth_inputs(args: &InputsArgs) -> Result<()> {
+    let dir = &args.scene;
+    let image = render::image_io::RgbImage::read_exr(dir.join("image.exr"))?;
+    let mask = render::image_io::Mask::read_png(dir.join("mask.png"))?;
+    let camera = Camera::read(dir.join("camera.json"))?;
+    let photo = alp::estimate::Photo::new(image, mask, camera).map_err(|e| e.in_file(dir.join("image.exr")))?;
+    let inputs = alp::study::inputs::draw(&photo, args.seed)?;
+    alp::study::inputs::write(dir, &inputs)
 }
 
 fn synth_captures(args: &CaptureArgs) -> Result<()> {

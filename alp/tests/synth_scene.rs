@@ -279,3 +279,109 @@ fn estimate_memory_stays_flat_from_one_phase_to_the_next() {
     }
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+/// `alp synth inputs` writes the inputs people have beside a scene, from its
+/// seed, all of them or none; the estimate reads the JPEG it wrote as 8-bit,
+/// finds its white clipped, and the blurred photo's blur.
+#[test]
+fn synth_inputs_writes_the_inputs_people_have_and_the_estimate_reads_them() {
+    let (dir, env) = workspace("synth-inputs", 32);
+    let scene = dir.join("scene");
+    assert!(
+        synth_sized(&env, &scene, ("160", "120"), &["--seed", "5"])
+            .status
+            .success()
+    );
+    let scene_arg = scene.to_str().expect("utf-8");
+    let out = alp(&["synth", "inputs", "--scene", scene_arg, "--seed", "9"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let files = [
+        "mask_traced.png",
+        "mask_segmenter.png",
+        "image_blur.exr",
+        "image.jpg",
+        "box.txt",
+        "inputs.json",
+    ];
+    let read = |f: &str| std::fs::read(scene.join(f)).expect(f);
+    let first: Vec<Vec<u8>> = files.iter().map(|f| read(f)).collect();
+    let exact = Mask::read_png(scene.join("mask.png")).expect("mask");
+    for name in ["mask_traced.png", "mask_segmenter.png"] {
+        let mask = Mask::read_png(scene.join(name)).expect(name);
+        let changed = mask.inside.iter().zip(&exact.inside).filter(|(a, b)| a != b).count();
+        assert!(
+            changed > 0 && changed < exact.count() / 2,
+            "{name}: {changed} pixels changed"
+        );
+    }
+    let drawn: serde_json::Value = serde_json::from_slice(&read("inputs.json")).expect("JSON");
+    let b: Vec<u32> = String::from_utf8(read("box.txt"))
+        .expect("utf-8")
+        .trim()
+        .split(',')
+        .map(|v| v.parse().expect("a number"))
+        .collect();
+    assert_eq!(serde_json::json!(b), drawn["probe_box"]);
+    // The same seed draws the same inputs.
+    assert!(
+        alp(&["synth", "inputs", "--scene", scene_arg, "--seed", "9"])
+            .status
+            .success()
+    );
+    for (f, before) in files.iter().zip(&first) {
+        assert_eq!(&read(f), before, "{f} differs between runs of one seed");
+    }
+    // The estimate of the JPEG finds its clipped white; of the blurred photo, its blur.
+    let run = |image: &str, name: &str| -> serde_json::Value {
+        let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
+        let (image, mask, camera, out) = (
+            s(&scene.join(image)),
+            s(&scene.join("mask.png")),
+            s(&scene.join("camera.json")),
+            s(&dir.join(name)),
+        );
+        let args = [
+            "estimate",
+            "--image",
+            &image,
+            "--mask",
+            &mask,
+            "--camera",
+            &camera,
+            "--probe",
+            "can",
+            "--out",
+            &out,
+            "--quality",
+            "fast",
+            "--threads",
+            "1",
+        ];
+        let run = alp(&args);
+        assert!(run.status.success(), "{}", stderr(&run));
+        serde_json::from_slice(&std::fs::read(dir.join(name).join("report.json")).expect("report")).expect("JSON")
+    };
+    let jpeg = run("image.jpg", "from-jpeg");
+    assert!(
+        jpeg["clipped_pixels"].as_u64().expect("clipped") > 0,
+        "{}",
+        jpeg["clipped_pixels"]
+    );
+    let blurred = run("image_blur.exr", "from-blur");
+    let (found, drawn_blur) = (
+        blurred["blur"]["blur_px"].as_f64().expect("blur"),
+        drawn["blur_px"].as_f64().expect("drawn blur"),
+    );
+    assert!((found - drawn_blur).abs() < 0.5, "blur {found}, drawn {drawn_blur}");
+    // A scene without its mask is an error naming the file, and writes nothing.
+    std::fs::remove_file(scene.join("mask.png")).expect("remove");
+    let bare = dir.join("bare");
+    std::fs::create_dir_all(&bare).expect("dir");
+    for f in ["image.exr", "camera.json"] {
+        std::fs::copy(scene.join(f), bare.join(f)).expect("copy");
+    }
+    let out = alp(&["synth", "inputs", "--scene", bare.to_str().expect("utf-8")]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("mask.png"), "{}", stderr(&out));
+    assert_eq!(std::fs::read_dir(&bare).expect("dir").count(), 2, "nothing written");
+}

@@ -44,6 +44,11 @@ pub struct Camera {
     pub right: Vec3,
     /// Unit image-up direction (world): the projection of `up` orthogonal to `forward`.
     pub image_up: Vec3,
+    /// The photo's blur beyond its pixels' box, the standard deviation of a
+    /// Gaussian in pixels (defocus, motion, the lens, demosaicing): each
+    /// rendered pixel's rays spread over it. 0 (as `camera.json` gives it):
+    /// a sharp pinhole. Not part of `camera.json`; the estimate measures it.
+    pub footprint_px: f32,
     tan_half_fov_y: f32,
 }
 
@@ -97,8 +102,21 @@ impl Camera {
             forward,
             right,
             image_up,
+            footprint_px: 0.0,
             tan_half_fov_y,
         })
+    }
+
+    /// The camera with a blur of `footprint_px` (see [`Camera::footprint_px`]);
+    /// fails on a negative or non-finite one.
+    pub fn with_footprint(self, footprint_px: f32) -> Result<Self> {
+        if !(footprint_px.is_finite() && footprint_px >= 0.0) {
+            return Err(RenderError::value(
+                "footprint_px",
+                format!("{footprint_px} must be finite and >= 0"),
+            ));
+        }
+        Ok(Camera { footprint_px, ..self })
     }
 
     /// Reads and validates `camera.json`.

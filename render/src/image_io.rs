@@ -151,6 +151,35 @@ impl RgbImage {
         }
     }
 
+    /// The image as an 8-bit sRGB JPEG of `quality` (1 to 100), its radiance
+    /// times `exposure` first (values past 1 clip at 255): what a camera
+    /// that writes JPEGs keeps of a linear photo.
+    pub fn encode_jpeg(&self, exposure: f32, quality: u8) -> Result<Vec<u8>> {
+        let bytes: Vec<u8> = self
+            .pixels
+            .iter()
+            .flat_map(|p| p.map(|v| (srgb_encode(v * exposure) * 255.0).round() as u8))
+            .collect();
+        let mut encoded = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut encoded, quality.clamp(1, 100))
+            .encode(
+                &bytes,
+                self.width as u32,
+                self.height as u32,
+                image::ExtendedColorType::Rgb8,
+            )
+            .map_err(|e| RenderError::io(Path::new("<jpeg>"), "encode JPEG", e))?;
+        Ok(encoded)
+    }
+
+    /// Decodes an 8-bit sRGB JPEG held in memory to linear values in [0, 1]
+    /// (as [`read_photo`](Self::read_photo) reads a `.jpg` file).
+    pub fn decode_jpeg(bytes: &[u8]) -> Result<Self> {
+        let decoded = image::load_from_memory_with_format(bytes, image::ImageFormat::Jpeg)
+            .map_err(|e| RenderError::io(Path::new("<jpeg>"), "decode JPEG", e))?;
+        Ok(Self::from_rgb32f(decoded.into_rgb32f(), srgb_decode))
+    }
+
     /// An RGB image from a decoded float buffer, each value through `map`.
     fn from_rgb32f(rgb: image::Rgb32FImage, map: impl Fn(f32) -> f32) -> Self {
         let (width, height) = (rgb.width() as usize, rgb.height() as usize);

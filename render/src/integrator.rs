@@ -39,7 +39,7 @@ use crate::mesh::Mesh;
 use crate::pose::Pose;
 use crate::posed::{MeshVars, PoseVars, PosedMesh, pack_pose};
 use crate::probe::ProbeAsset;
-use crate::sampling::{EnvSample, EnvSampler, Rng, stratified_square};
+use crate::sampling::{EnvSample, EnvSampler, Rng, sample_standard_normal_2d, stratified_square};
 
 /// Monte Carlo settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -148,6 +148,9 @@ impl Occluder {
 const BSDF_STREAM: u64 = 1 << 40;
 /// Start of the random number streams of the env-map samples (plus the pixel index).
 const LIGHT_STREAM: u64 = 2 << 40;
+/// Start of the random number streams of a blurred camera's spread of the sub-pixel offsets
+/// (plus the pixel index).
+const FOOTPRINT_STREAM: u64 = 3 << 40;
 /// Start of the random number streams of the bounces' BRDF samples (plus the pixel index).
 const BOUNCE_STREAM: u64 = 3 << 40;
 /// Start of the random number streams of the bounces' env-map samples (plus the pixel index).
@@ -205,11 +208,14 @@ impl PrimaryHits {
                 None => all_in_front = false,
             }
         }
+        // A blurred camera's rays reach three footprints beyond a pixel.
+        let spread = camera.footprint_px;
+        let reach = 1.0 + (3.0 * spread).ceil();
         let (cols, rows) = if all_in_front {
             let clip = |a: f32, n: usize| (a.max(0.0) as usize).min(n);
             (
-                clip(x0.floor() - 1.0, w)..clip(x1.ceil() + 1.0, w),
-                clip(y0.floor() - 1.0, h)..clip(y1.ceil() + 1.0, h),
+                clip(x0.floor() - reach, w)..clip(x1.ceil() + reach, w),
+                clip(y0.floor() - reach, h)..clip(y1.ceil() + reach, h),
             )
         } else {
             (0..w, 0..h)
@@ -254,6 +260,12 @@ impl PrimaryHits {
                     let n = if on_silhouette(row, col) { silhouette_spp } else { spp };
                     let offsets = &mut offsets[..n];
                     stratified_offsets(settings.seed, pixel, offsets);
+                    if spread > 0.0 {
+                        let mut rng = Rng::new(settings.seed, FOOTPRINT_STREAM + pixel as u64);
+                        offsets
+                            .iter_mut()
+                            .for_each(|o| *o += spread * sample_standard_normal_2d(rng.next_2d()));
+                    }
                     let lobe = &mut lobe_points[..n];
                     stratified_square(&mut Rng::new(settings.seed, BSDF_STREAM + pixel as u64), lobe);
                     let before = samples.len();

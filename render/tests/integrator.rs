@@ -979,3 +979,66 @@ fn a_traced_record_s_transport_renders_the_probe_as_the_renderer_does() {
         "per pixel: {right} right way up, {upside_down} upside down"
     );
 }
+
+/// A blurred camera's pixel sees the probe in the share its footprint -- the pixel's box spread
+/// by a Gaussian of `footprint_px` -- lies on it: across a straight edge, the box's mean of
+/// `Phi(distance / footprint)`.
+#[test]
+fn a_blurred_camera_s_coverage_falls_off_across_an_edge_as_its_footprint_says() {
+    // A 0.03 m cube square to a 64x48 camera 0.3 m away: its front face's left edge is a
+    // vertical line of the image.
+    let mesh = render::procedural::unit_cube();
+    let probe = ProbeAsset {
+        mesh,
+        ..SodaCan::default().build()
+    };
+    let pose = Pose::new(Quat::IDENTITY, 0.03, Vec3::new(0.0, 0.0, 0.0));
+    let sharp = Camera::new(
+        64,
+        48,
+        30.0,
+        Vec3::new(0.001, 0.0, 0.3),
+        Vec3::new(0.001, 0.0, 0.0),
+        Vec3::Y,
+    )
+    .expect("camera");
+    let edge_x = sharp.project(Vec3::new(-0.015, 0.0, 0.015)).expect("in view").x as f64;
+    let phi = |x: f64| 0.5 * (1.0 + erf(x / std::f64::consts::SQRT_2));
+    for footprint in [0.0f32, 1.5] {
+        let camera = sharp.with_footprint(footprint).expect("a footprint");
+        let hits = trace(&probe, &pose, &camera, 1024);
+        let row = 24usize;
+        for col in (edge_x.floor() as usize).saturating_sub(5)..edge_x as usize + 6 {
+            let p = (row * 64 + col) as u32;
+            let coverage = hits
+                .pixels
+                .iter()
+                .position(|&q| q == p)
+                .map_or(0.0, |k| hits.coverage[k] as f64);
+            // The pixel's box [col, col + 1), each point's share of the Gaussian right of the edge.
+            let expected = match footprint {
+                0.0 => (col as f64 + 1.0 - edge_x).clamp(0.0, 1.0),
+                s => {
+                    (0..1000)
+                        .map(|k| phi((col as f64 + (k as f64 + 0.5) / 1000.0 - edge_x) / s as f64))
+                        .sum::<f64>()
+                        / 1000.0
+                }
+            };
+            assert!(
+                (coverage - expected).abs() < 0.05,
+                "footprint {footprint}, column {col} ({} px from the edge): coverage {coverage}, expected {expected}",
+                col as f64 + 0.5 - edge_x
+            );
+        }
+    }
+    assert!(sharp.with_footprint(-1.0).is_err() && sharp.with_footprint(f32::NAN).is_err());
+}
+
+/// The error function (Abramowitz and Stegun 7.1.26, within 1.5e-7).
+fn erf(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let poly =
+        t * (0.254_829_592 + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    (1.0 - poly * (-x * x).exp()).copysign(x)
+}

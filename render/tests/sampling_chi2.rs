@@ -7,8 +7,8 @@ use std::f64::consts::PI;
 use glam::{DVec3, Vec2, Vec3};
 use render::envmap::{EnvMap, direction_to_uv, uv_to_direction};
 use render::sampling::{
-    EnvSampler, Frame, Rng, cosine_hemisphere_pdf, ggx, sample_cosine_hemisphere, sample_uniform_sphere,
-    uniform_sphere_pdf,
+    EnvSampler, Frame, Rng, cosine_hemisphere_pdf, ggx, sample_cosine_hemisphere, sample_standard_normal_2d,
+    sample_uniform_sphere, uniform_sphere_pdf,
 };
 
 const SAMPLES: usize = 1_000_000;
@@ -234,6 +234,37 @@ fn uniform_sphere_fits_its_pdf() {
         |_| uniform_sphere_pdf() as f64,
     );
     assert_fits(p, "uniform sphere");
+}
+
+/// A pair of standard normal values is a point of the plane whose normal CDFs `(Phi(x), Phi(y))`
+/// are uniform on the unit square: carried onto the sphere by the uniform sphere's own
+/// (area-preserving) map, the pairs must fit the uniform sphere's pdf.
+#[test]
+fn standard_normal_pairs_fit_their_pdf() {
+    let domain = PolarDomain {
+        frame: Frame::from_normal(Vec3::Z),
+        power: 1.0,
+    };
+    let phi = |x: f32| 0.5 * (1.0 + erf(x as f64 / std::f64::consts::SQRT_2));
+    let p = chi2_test(
+        "standard normal pairs",
+        &domain,
+        (32, 64),
+        |rng| {
+            let n = sample_standard_normal_2d(rng.next_2d());
+            Some(sample_uniform_sphere(Vec2::new(phi(n.x) as f32, phi(n.y) as f32)))
+        },
+        |_| uniform_sphere_pdf() as f64,
+    );
+    assert_fits(p, "standard normal pairs");
+}
+
+/// The error function (Abramowitz and Stegun 7.1.26, within 1.5e-7).
+fn erf(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
+    let poly =
+        t * (0.254_829_592 + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    (1.0 - poly * (-x * x).exp()).copysign(x)
 }
 
 #[test]

@@ -64,6 +64,11 @@ pub struct EstimateArgs {
     /// too wide or too narrow. Costs a few lighting solves more.
     #[arg(long)]
     pub size_search: bool,
+    /// The photo's blur beyond its pixels (defocus, motion, the lens), a
+    /// Gaussian's standard deviation in pixels; default: measured on the
+    /// probe's edges (report.json `blur`). 0 for a photo known to be sharp.
+    #[arg(long)]
+    pub blur: Option<f32>,
     /// How the lighting is solved: `least-squares` (the exact bounded
     /// solve) or `adam` (the paper's recipe: many Adam steps on the same
     /// loss, several times the time).
@@ -122,14 +127,25 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     if args.size_search {
         settings.pose_search.size_step_px = 0.5;
     }
+    if let Some(blur) = args.blur {
+        if !(blur.is_finite() && blur >= 0.0) {
+            return Err(Error::invalid(
+                "--blur",
+                format!("{blur} must be a finite number of pixels >= 0"),
+            ));
+        }
+        settings.photo.blur_px = Some(blur);
+    }
     settings.known_pose = args.pose.as_ref().map(Pose::read).transpose()?;
     if let Some(path) = &args.objective {
         settings.objective = Arc::new(Objective::from_file(path)?);
     }
     let camera = Camera::read(&args.camera)?;
-    let image = read_photo(&args.image)?;
+    let (image, encoding) = read_photo(&args.image)?;
     let mask = Mask::read_png(&args.mask)?;
-    let photo = Photo::new(image, mask, camera).map_err(|e| e.in_file(&args.image))?;
+    let photo = Photo::new(image, mask, camera)
+        .map_err(|e| e.in_file(&args.image))?
+        .with_encoding(encoding);
     let probe = crate::probes::load(&args.probe)?;
     let pool = thread_pool(args.threads)?;
     let verbose = std::io::stderr().is_terminal();
@@ -174,18 +190,18 @@ pub(crate) fn write_estimate(dir: &Path, photo: &RgbImage, result: &Estimate) ->
 }
 
 /// Reads a photo (OpenEXR, Radiance HDR, PNG or JPEG: [`RgbImage::read_photo`]),
-/// warning on stderr when it is display-referred sRGB.
-pub(crate) fn read_photo(path: &Path) -> Result<RgbImage> {
+/// warning on stderr when it is display-referred sRGB; and how it was stored.
+pub(crate) fn read_photo(path: &Path) -> Result<(RgbImage, PhotoEncoding)> {
     let (image, encoding) = RgbImage::read_photo(path)?;
     if let PhotoEncoding::Srgb { bits } = encoding {
         eprintln!(
             "alp: warning: {} is a {bits}-bit sRGB image, not HDR: it is linearised, its clipped highlights are \
-             left out (the brightest lights come out dimmer than they are) and its exposure is unknown \
-             (the map is right up to one scale)",
+             read as lower bounds (the brightest lights may come out dimmer than they are) and its exposure is \
+             unknown (the map is right up to one scale)",
             path.display()
         );
     }
-    Ok(image)
+    Ok((image, encoding))
 }
 
 /// A pool of `threads` workers (all cores when `None`).

@@ -19,6 +19,7 @@
 //! Every tuned number lives in [`settings`]. `docs/method.md` explains each
 //! stage and the measurements behind its choices.
 
+pub mod blur;
 pub mod cli;
 pub mod hypotheses;
 pub mod lighting;
@@ -127,8 +128,21 @@ pub fn estimate_with(
     let asset = along_y.as_ref().unwrap_or(asset);
     let known_pose = settings.known_pose.map(|pose| symmetry::turned_to_y(&pose, to_y));
     let probe = Probe::new(asset, bsdf, &settings.symmetry);
+    // The photo's blur, which every render of the probe then models.
+    let blur = match settings.photo.blur_px {
+        Some(blur_px) => blur::BlurEstimate {
+            blur_px,
+            edge_width_px: 0.0,
+            edges: 0,
+        },
+        None => blur::photo_blur(photo, &settings.photo.blur)?,
+    };
+    let blurred = match blur.blur_px >= settings.photo.blur.min_blur_px {
+        true => Some(photo.clone().with_blur(blur.blur_px)?),
+        false => None,
+    };
     // The photo as the estimate works on it.
-    let full = photo;
+    let full = blurred.as_ref().unwrap_or(photo);
     let working = WorkingPhoto::new(full, &settings.photo)?;
     let (photo, clipped) = (working.photo(full), &working.clipped);
     let reference = ReferenceMask::new(&photo.mask)?;
@@ -200,6 +214,7 @@ pub fn estimate_with(
         mask_on_border_pixels: mask_on_border(&full.mask),
         working_image: WorkingImage::of(photo, working.factor),
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
+        blur,
         final_spp,
         phases: phases.phases,
         psnr_db: final_psnr,

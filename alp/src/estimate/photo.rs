@@ -4,7 +4,7 @@
 //! allow. Everything after this stage reads the photo through [`Photo`].
 
 use render::camera::Camera;
-use render::image_io::{Mask, RgbImage};
+use render::image_io::{Mask, PhotoEncoding, RgbImage};
 
 use super::settings::PhotoSettings;
 use crate::error::{Error, Result};
@@ -12,12 +12,15 @@ use crate::error::{Error, Result};
 /// The photo and what is known about it.
 #[derive(Clone)]
 pub struct Photo {
-    /// Linear HDR RGB.
+    /// Linear RGB.
     pub image: RgbImage,
     /// The probe's segmentation.
     pub mask: Mask,
     /// The camera that took it.
     pub camera: Camera,
+    /// How its values were stored: linear HDR, or display-referred sRGB
+    /// decoded to linear (8-bit values are intervals, white is clipped).
+    pub encoding: PhotoEncoding,
 }
 
 impl Photo {
@@ -49,7 +52,43 @@ impl Photo {
         {
             return Err(Error::invalid("image", "holds NaN, infinite or negative radiance"));
         }
-        Ok(Photo { image, mask, camera })
+        Ok(Photo {
+            image,
+            mask,
+            camera,
+            encoding: PhotoEncoding::Linear,
+        })
+    }
+
+    /// The photo blurred by `blur_px` beyond its pixels' box (a Gaussian's
+    /// standard deviation): every render of the probe through its camera
+    /// spreads each pixel's rays by it.
+    pub fn with_blur(self, blur_px: f32) -> Result<Self> {
+        let camera = self.camera.with_footprint(blur_px)?;
+        Ok(Photo { camera, ..self })
+    }
+
+    /// The photo, its values stored as `encoding` says.
+    pub fn with_encoding(self, encoding: PhotoEncoding) -> Self {
+        Photo { encoding, ..self }
+    }
+
+    /// The radiance one stored level spans at the (linear) value `v`: 0
+    /// for linear HDR; for sRGB of `bits` bits, `d linear / d encoded` over
+    /// `2^bits - 1` (IEC 61966-2-1), the width of the interval an 8-bit
+    /// value stands for.
+    pub fn level_step(&self, v: f64) -> f64 {
+        match self.encoding {
+            PhotoEncoding::Linear => 0.0,
+            PhotoEncoding::Srgb { bits } => {
+                let levels = ((1u32 << bits) - 1) as f64;
+                let slope = match v <= 0.003_130_8 {
+                    true => 1.0 / 12.92,
+                    false => 2.4 / 1.055 * v.powf(1.4 / 2.4),
+                };
+                slope / levels
+            }
+        }
     }
 
     /// The photo box-filtered by `factor` (at least 1, not necessarily
@@ -95,6 +134,7 @@ impl Photo {
         };
         let (columns, rows) = (spans(w, bw), spans(h, bh));
         let half_height = (self.camera.fov_y_deg.to_radians() * 0.5).tan() * (bh as f64 * factor / h as f64) as f32;
+        // A blur spans fewer of the wider pixels.
         let camera = Camera::new(
             bw as u32,
             bh as u32,
@@ -102,7 +142,8 @@ impl Photo {
             self.camera.origin,
             self.camera.target,
             self.camera.up,
-        )?;
+        )?
+        .with_footprint(self.camera.footprint_px / factor as f32)?;
         let area = factor * factor;
         let mut pixels = Vec::with_capacity(bw * bh);
         let (mut inside, mut clipped_blocks) = (Vec::with_capacity(bw * bh), Vec::with_capacity(bw * bh));
@@ -123,7 +164,7 @@ impl Photo {
             }
         }
         let photo = Photo::new(RgbImage::new(bw, bh, pixels), Mask::new(bw, bh, inside), camera)?;
-        Ok((photo, clipped_blocks))
+        Ok((photo.with_encoding(self.encoding), clipped_blocks))
     }
 }
 
@@ -145,9 +186,21 @@ pub fn mask_on_border(mask: &Mask) -> usize {
         .count()
 }
 
-/// Pixels at the photo's clipping level: when many mask pixels share the
-/// maximum value of a channel, the sensor saturated there.
+/// Pixels at the photo's clipping level. In linear HDR: when many mask
+/// pixels share the maximum value of a channel, the sensor saturated there.
+/// In sRGB: a channel at or above `PhotoSettings::srgb_clip` (white, which
+/// an 8-bit photo cannot pass), and the pixels within
+/// `PhotoSettings::srgb_clip_ringing_px` of one that are themselves above
+/// half of it: a JPEG rings about a clipped highlight, and its edge comes
+/// out below white.
 pub(super) fn clipped_pixels(photo: &Photo, settings: &PhotoSettings) -> Vec<bool> {
+    match photo.encoding {
+        PhotoEncoding::Linear => clipped_at_maximum(photo, settings),
+        PhotoEncoding::Srgb { .. } => clipped_at_white(photo, settings),
+    }
+}
+
+fn clipped_at_maximum(photo: &Photo, settings: &PhotoSettings) -> Vec<bool> {
     let mut clipped = vec![false; photo.mask.inside.len()];
     for c in 0..3 {
         let max = photo
@@ -168,17 +221,39 @@ pub(super) fn clipped_pixels(photo: &Photo, settings: &PhotoSettings) -> Vec<boo
     clipped
 }
 
+fn clipped_at_white(photo: &Photo, settings: &PhotoSettings) -> Vec<bool> {
+    let (w, h) = (photo.image.width, photo.image.height);
+    let peak = |i: usize| photo.image.pixels[i].into_iter().fold(0.0f32, f32::max);
+    let white: Vec<bool> = (0..w * h).map(|i| peak(i) >= settings.srgb_clip).collect();
+    let r = settings.srgb_clip_ringing_px as i64;
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            white[i]
+                || (peak(i) >= 0.5 * settings.srgb_clip
+                    && (-r..=r).any(|dy| {
+                        (-r..=r).any(|dx| {
+                            let (u, v) = (x + dx, y + dy);
+                            (0..w as i64).contains(&u)
+                                && (0..h as i64).contains(&v)
+                                && white[v as usize * w + u as usize]
+                        })
+                    }))
+        })
+        .collect()
+}
+
 /// Whether pixel `p` (covered by the probe to `coverage`) is data: on the
 /// probe ([`on_probe`]) and not clipped.
 pub(super) fn usable_pixel(photo: &Photo, clipped: &[bool], p: u32, coverage: f32) -> bool {
     on_probe(photo, p, coverage) && !clipped[p as usize]
 }
 
-/// Whether pixel `p` (covered by the probe to `coverage`) is inside the
-/// photo's mask and wholly on the probe (a partly covered pixel mixes in
-/// the background).
-pub(super) fn on_probe(photo: &Photo, p: u32, coverage: f32) -> bool {
-    photo.mask.inside[p as usize] && coverage >= 1.0
+/// Whether pixel `p` (covered by the probe to `coverage`) is wholly on the
+/// probe (a partly covered pixel mixes in the background), whatever the
+/// photo's mask says: the posed probe's outline is the photo's.
+pub(super) fn on_probe(_photo: &Photo, _p: u32, coverage: f32) -> bool {
+    coverage >= 1.0
 }
 
 /// Which of the probe's pixels a lighting fit reads.
@@ -337,6 +412,71 @@ mod tests {
         assert_eq!(count(&[7, 8, 9, 13, 14, 15, 19, 20, 21]), 0);
         assert_eq!(count(&[2, 6, 11, 27]), 4);
         assert_eq!(count(&[0, 14]), 1);
+    }
+
+    #[test]
+    fn an_srgb_photo_s_white_and_the_bright_pixels_ringing_about_it_are_clipped() {
+        // A 32x8 photo of 0.3 grey, white at (6, 4), a JPEG's ring of 0.8
+        // about it and a bright pixel of 0.8 far away.
+        let (w, h) = (32, 8);
+        let mut pixels = vec![[0.3f32; 3]; w * h];
+        pixels[4 * w + 6] = [1.0, 0.95, 1.0];
+        pixels[4 * w + 7] = [0.8; 3];
+        pixels[3 * w + 5] = [0.8; 3];
+        pixels[4 * w + 5] = [0.2; 3];
+        pixels[w + 1] = [0.8; 3];
+        let camera = Camera::new(w as u32, h as u32, 40.0, Vec3::Z, Vec3::ZERO, Vec3::Y).expect("camera");
+        let photo = Photo::new(RgbImage::new(w, h, pixels), Mask::new(w, h, vec![true; w * h]), camera).expect("photo");
+        let settings = crate::estimate::Settings::default().photo;
+        let flags = clipped_pixels(&photo.clone().with_encoding(PhotoEncoding::Srgb { bits: 8 }), &settings);
+        let clipped: Vec<usize> = (0..w * h).filter(|&i| flags[i]).collect();
+        assert_eq!(clipped, vec![3 * w + 5, 4 * w + 6, 4 * w + 7]);
+        // In linear HDR, one pixel at the maximum is no clipping.
+        assert!(!clipped_pixels(&photo, &settings).contains(&true));
+    }
+
+    #[test]
+    fn a_box_filtered_photo_keeps_its_encoding_and_its_blur_in_its_wider_pixels() {
+        let camera = Camera::new(40, 30, 40.0, Vec3::Z, Vec3::ZERO, Vec3::Y).expect("camera");
+        let photo = Photo::new(
+            RgbImage::filled(40, 30, [0.5; 3]),
+            Mask::new(40, 30, vec![true; 1200]),
+            camera,
+        )
+        .expect("photo")
+        .with_encoding(PhotoEncoding::Srgb { bits: 8 })
+        .with_blur(1.5)
+        .expect("a blur");
+        let (small, _) = photo.downsampled(2.0, &[false; 1200]).expect("box-filtered");
+        assert_eq!(small.encoding, PhotoEncoding::Srgb { bits: 8 });
+        assert!((small.camera.footprint_px - 0.75).abs() < 1e-6);
+        assert!(photo.with_blur(-1.0).is_err());
+    }
+
+    #[test]
+    fn an_8_bit_level_spans_the_radiance_the_srgb_curve_gives_it() {
+        let camera = Camera::new(4, 4, 40.0, Vec3::Z, Vec3::ZERO, Vec3::Y).expect("camera");
+        let photo = Photo::new(
+            RgbImage::filled(4, 4, [0.5; 3]),
+            Mask::new(4, 4, vec![true; 16]),
+            camera,
+        )
+        .expect("photo");
+        assert_eq!(photo.level_step(0.5), 0.0);
+        let srgb = photo.with_encoding(PhotoEncoding::Srgb { bits: 8 });
+        let decode = |e: f64| match e <= 0.040_45 {
+            true => e / 12.92,
+            false => ((e + 0.055) / 1.055).powf(2.4),
+        };
+        for code in [3.0, 40.0, 128.0, 250.0] {
+            let v = decode(code / 255.0);
+            let span = decode((code + 0.5) / 255.0) - decode((code - 0.5) / 255.0);
+            assert!(
+                (srgb.level_step(v) - span).abs() < 0.02 * span,
+                "code {code}: {} against {span}",
+                srgb.level_step(v)
+            );
+        }
     }
 
     #[test]

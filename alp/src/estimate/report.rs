@@ -7,6 +7,8 @@ use render::image_io::RgbImage;
 use render::pose::Pose;
 use serde::Serialize;
 
+use super::blur::BlurEstimate;
+
 use super::photo::Photo;
 use super::settings::Settings;
 use crate::objective::TermReport;
@@ -80,6 +82,10 @@ pub struct Report {
     pub working_image: WorkingImage,
     /// Pixels excluded as clipped (over-exposed), of the working image.
     pub clipped_pixels: usize,
+    /// The photo's blur: given (`--blur`), or measured on the probe's edges
+    /// (`estimate::blur`); every render of the probe spreads its pixels' rays
+    /// by it when it reaches `BlurSettings::min_blur_px`.
+    pub blur: BlurEstimate,
     /// Samples per pixel of the final lighting solve: the settings', or
     /// fewer for a probe so large in the photo that they would overrun
     /// `LightingSettings::final_sample_budget`.

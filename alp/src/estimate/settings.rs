@@ -71,9 +71,48 @@ pub struct PhotoSettings {
     pub clip_one_in: usize,
     /// A pixel within this fraction of its channel's maximum is at it.
     pub clip_level: f32,
+    /// An sRGB photo's channel at or above this (linear) is clipped: white
+    /// less what a JPEG's rounding and ringing take off it.
+    pub srgb_clip: f32,
+    /// Bright pixels this near (pixels) a clipped one in an sRGB photo are
+    /// clipped too: a JPEG's ringing about a highlight.
+    pub srgb_clip_ringing_px: usize,
     /// Samples per pixel of the re-render at the photo's size after working
     /// on a box-filtered photo: noise against time.
     pub rerender_spp: u32,
+    /// The photo's blur, a Gaussian's standard deviation in pixels, when it
+    /// is known (`alp estimate --blur`); None: measured on the probe's edges.
+    pub blur_px: Option<f32>,
+    /// How the blur is measured on the probe's edges.
+    pub blur: BlurSettings,
+}
+
+/// The photo's blur measured on the probe's edges (`estimate::blur`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct BlurSettings {
+    /// Each edge's profile runs this far (pixels) either side of the
+    /// mask's outline: wide enough for the widest blur and the mask's error.
+    pub reach_px: f32,
+    /// The edge is looked for this far (pixels) either side of the mask's
+    /// outline.
+    pub place_px: f32,
+    /// Every this many points of the outline are measured: time against
+    /// the median's noise.
+    pub every_nth: usize,
+    /// An edge counts when its step is at least this share of its
+    /// profile's level: weak edges (a mirror's limb against what it
+    /// reflects) are all width.
+    pub min_contrast: f64,
+    /// An edge counts when the blurred step leaves at most this share of
+    /// its profile's variance: the probe's own detail near the outline.
+    pub max_residual: f64,
+    /// Fewer clear edges than this tell no blur.
+    pub min_edges: usize,
+
+    /// Profiles are divided by their level plus this share of the photo's.
+    pub dark_level: f64,
+    /// A blur below this (pixels) is none: the renders keep a sharp camera.
+    pub min_blur_px: f32,
 }
 
 /// What the asset tells of its axis and symmetry.
@@ -219,6 +258,10 @@ pub struct LightingSettings {
     /// What the light transport of the pilot, the lean and the final fits
     /// models.
     pub model: LightModel,
+    /// An sRGB photo's noise, in its stored levels (rounding and a JPEG's
+    /// quantised coefficients), added to every pixel's relative error: its
+    /// dark pixels' colours count less.
+    pub srgb_noise_levels: f64,
     /// Samples per pixel of the pilot map, which guides the later solves'
     /// env-map samples (0: no pilot, BRDF samples alone, no photo searches).
     pub spp_pilot: u32,
@@ -348,6 +391,19 @@ impl Default for Settings {
                 working_mask_pixels: 40_000,
                 clip_one_in: 200,
                 clip_level: 0.9999,
+                srgb_clip: 0.91,
+                srgb_clip_ringing_px: 1,
+                blur_px: None,
+                blur: BlurSettings {
+                    reach_px: 4.0,
+                    place_px: 2.0,
+                    every_nth: 2,
+                    min_contrast: 0.2,
+                    max_residual: 0.1,
+                    min_edges: 20,
+                    dark_level: 0.05,
+                    min_blur_px: 0.5,
+                },
                 rerender_spp: 8,
             },
             symmetry: SymmetrySettings {
@@ -404,6 +460,7 @@ impl Default for Settings {
                     interreflection: true,
                     mis: true,
                 },
+                srgb_noise_levels: 1.5,
                 spp_pilot: 16,
                 spp_lean: 16,
                 spp_final: 128,

@@ -13,6 +13,7 @@
 
 pub mod chart;
 pub mod cli;
+pub mod inputs;
 pub mod paired;
 pub mod perturb;
 pub mod record;

@@ -12,9 +12,11 @@ use crate::objective::Objective;
 use super::{Perturb, Perturbation, Variant, perturb};
 
 /// The perturbations and ablations, in the order run and charted.
-pub const PERTURBATIONS: [&str; 14] = [
+pub const PERTURBATIONS: [&str; 17] = [
     "mask_erode",
     "mask_dilate",
+    "mask_traced",
+    "mask_segmenter",
     "noise",
     "clip",
     "exposure_under",
@@ -22,6 +24,7 @@ pub const PERTURBATIONS: [&str; 14] = [
     "border",
     "small",
     "blur",
+    "jpeg",
     "one_start",
     "no_pose_priors",
     "no_light_smoothness",
@@ -36,6 +39,12 @@ pub const UNPERTURBED: &str = "unperturbed";
 /// Seed of the added noise (the same on every scene and run).
 const NOISE_SEED: u64 = 7;
 
+/// Seed of a traced mask's strays (the same on every scene and run).
+const TRACE_SEED: u64 = 11;
+
+/// The share of the probe's pixels a JPEG's exposure brings to white.
+const JPEG_CLIP_SHARE: f64 = 0.01;
+
 /// A change of the photo at a strength.
 type Change = fn(&Photo, f64) -> Result<Photo>;
 
@@ -46,6 +55,8 @@ fn graded(name: &str) -> Option<(Vec<f64>, Change)> {
     Some(match name {
         "mask_erode" => (vec![1.0, 2.0, 3.0], |p, s| mask_grown(p, -(s as i32))),
         "mask_dilate" => (vec![1.0, 2.0, 3.0], |p, s| mask_grown(p, s as i32)),
+        "mask_traced" => (vec![1.0, 2.0, 3.0], |p, s| mask_traced(p, s as f32, TRACE_SEED)),
+        "mask_segmenter" => (vec![1.0], |p, _| mask_segmented(p)),
         "noise" => (vec![0.01, 0.03, 0.1], |p, s| noisy(p, s as f32, NOISE_SEED)),
         "clip" => (vec![0.005, 0.02, 0.05], clipped),
         "exposure_under" => (vec![0.5, 0.25, 0.1], |p, s| exposed(p, s as f32)),
@@ -53,6 +64,7 @@ fn graded(name: &str) -> Option<(Vec<f64>, Change)> {
         "border" => (vec![0.1, 0.25, 0.4], cut_by_border),
         "small" => (vec![120.0, 80.0, 40.0], |p, s| small(p, s as usize)),
         "blur" => (vec![0.5, 1.0, 2.0], |p, s| blurred(p, s as f32)),
+        "jpeg" => (vec![95.0, 85.0, 75.0], |p, s| Ok(jpeg(p, s as u8, JPEG_CLIP_SHARE)?.0)),
         _ => return None,
     })
 }

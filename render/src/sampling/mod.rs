@@ -15,6 +15,6 @@ pub use env::{EnvSample, EnvSampler};
 pub use frame::Frame;
 pub use rng::{Rng, stratified_square};
 pub use warp::{
-    cosine_hemisphere_pdf, sample_concentric_disk, sample_cosine_hemisphere, sample_linear, sample_uniform_sphere,
-    uniform_sphere_pdf,
+    cosine_hemisphere_pdf, sample_concentric_disk, sample_cosine_hemisphere, sample_linear, sample_standard_normal_2d,
+    sample_uniform_sphere, uniform_sphere_pdf,
 };

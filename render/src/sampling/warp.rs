@@ -16,6 +16,14 @@ pub fn sample_linear(u: f64, a: f64, b: f64) -> f64 {
     t.min(1.0)
 }
 
+/// Two independent standard normal values from a point of [0, 1)^2 (the Box-Muller transform:
+/// radius `sqrt(-2 ln(1 - u.x))`, angle `2 pi u.y`).
+pub fn sample_standard_normal_2d(u: Vec2) -> Vec2 {
+    let radius = (-2.0 * (1.0 - u.x).ln()).sqrt();
+    let (sin, cos) = (2.0 * PI * u.y).sin_cos();
+    radius * Vec2::new(cos, sin)
+}
+
 /// Shirley-Chiu concentric map of [0, 1)^2 onto the unit disk (area preserving, low distortion).
 pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;

@@ -22,35 +22,45 @@ pub fn pyramid(size: (usize, usize), coarsest: usize) -> Vec<(usize, usize)> {
 }
 
 /// The photo as a lighting solve reads it, per data pixel: the target
-/// radiance, the weight per channel, and whether the target is a lower
-/// bound only (a pixel the sensor clipped: its radiance is at least the
-/// clipping level, and a re-render above it is no error).
+/// radiance, the weight per channel, whether the target is a lower bound
+/// only (a pixel the sensor clipped: its radiance is at least the clipping
+/// level, and a re-render above it is no error), and per channel the
+/// half-width of the interval of radiance the stored value stands for (an
+/// 8-bit value is any radiance that rounds to it: a re-render within it is
+/// no error; 0 for linear HDR).
 #[derive(Clone, Debug, Default)]
 pub struct DataTerm {
     pub target: Vec<[f64; 3]>,
     pub weight: Vec<[f64; 3]>,
     pub at_least: Vec<bool>,
+    pub tolerance: Vec<[f64; 3]>,
 }
 
 impl DataTerm {
     /// The residual of pixel `p`'s channel `c` rendered as `value`: zero
-    /// above a lower bound.
+    /// above a lower bound and within the value's interval, measured from
+    /// the interval's end beyond it.
     #[inline]
     pub fn residual(&self, p: usize, c: usize, value: f64) -> f64 {
         let r = value - self.target[p][c];
+        let tolerance = self.tolerance[p][c];
         match self.at_least[p] && r > 0.0 {
             true => 0.0,
-            false => r,
+            false if r > tolerance => r - tolerance,
+            false if r < -tolerance => r + tolerance,
+            false => 0.0,
         }
     }
 
-    /// Targets met exactly (no bound), with their weights.
+    /// Targets met exactly (no bound, no interval), with their weights.
     pub fn exact(target: Vec<[f64; 3]>, weight: Vec<[f64; 3]>) -> Self {
         let at_least = vec![false; target.len()];
+        let tolerance = vec![[0.0; 3]; target.len()];
         DataTerm {
             target,
             weight,
             at_least,
+            tolerance,
         }
     }
 
@@ -502,6 +512,21 @@ mod tests {
         for (a, b) in solved.env.iter().zip(&truth) {
             assert!((a - b).abs() < tolerance, "{a} vs {b}");
         }
+    }
+
+    #[test]
+    fn a_value_s_interval_is_no_error_and_beyond_it_the_error_is_from_its_end() {
+        let mut data = DataTerm::exact(vec![[1.0, 2.0, 3.0]], vec![[1.0; 3]]);
+        data.tolerance[0] = [0.1, 0.0, 0.5];
+        assert_eq!(data.residual(0, 0, 1.05), 0.0);
+        assert_eq!(data.residual(0, 0, 0.95), 0.0);
+        assert!((data.residual(0, 0, 1.3) - 0.2).abs() < 1e-12);
+        assert!((data.residual(0, 0, 0.7) + 0.2).abs() < 1e-12);
+        assert!((data.residual(0, 1, 2.01) - 0.01).abs() < 1e-12, "no interval, exact");
+        // A clipped pixel's bound holds from below, beyond its interval too.
+        data.at_least[0] = true;
+        assert_eq!(data.residual(0, 2, 9.0), 0.0);
+        assert!((data.residual(0, 2, 2.0) + 0.5).abs() < 1e-12);
     }
 
     #[test]

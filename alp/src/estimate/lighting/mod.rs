@@ -224,7 +224,7 @@ pub(super) fn fit_lighting(
     let camera = &photo.camera;
     let keep = |p: u32| pixels.keeps(p, camera.width);
     let record = SampleRecord::trace(probe.asset, probe.bsdf, pose, camera, settings, sampling, passes, keep)?;
-    let mut data = pixel_targets(photo, &record.hits, clipped, purpose)?;
+    let mut data = pixel_targets(photo, &record.hits, clipped, purpose, lighting)?;
     if purpose == LightingPurpose::Output {
         let r = &record;
         let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());
@@ -332,6 +332,7 @@ pub(super) fn pixel_targets(
     hits: &PrimaryHits,
     clipped: &[bool],
     purpose: LightingPurpose,
+    lighting: &LightingSettings,
 ) -> Result<DataTerm> {
     // The relative L1 term's scale (objective::RgbL1), squared for least squares.
     let level = mask_mean_luminance(&photo.image, &photo.mask)?;
@@ -340,7 +341,10 @@ pub(super) fn pixel_targets(
         LightingPurpose::Search => f64::INFINITY,
         LightingPurpose::Output => level,
     };
-    let relative = |level: f64| 1.0 / (level.min(cap) + eps).powi(2);
+    // An sRGB photo's levels add their own noise: a JPEG's rounding of its
+    // coefficients moves a value by about `srgb_noise_levels` levels.
+    let noise = |v: f64| lighting.srgb_noise_levels * photo.level_step(v);
+    let relative = |v: f64| 1.0 / ((v.min(cap) + eps).powi(2) + noise(v).powi(2));
     let mut data = DataTerm::default();
     for (&p, &c) in hits.pixels.iter().zip(&hits.coverage) {
         let px = photo.image.pixels[p as usize].map(|v| v as f64);
@@ -354,6 +358,7 @@ pub(super) fn pixel_targets(
         data.target.push(px);
         data.weight.push(w);
         data.at_least.push(at_least);
+        data.tolerance.push(px.map(|v| 0.5 * photo.level_step(v)));
     }
     Ok(data)
 }
