@@ -67,6 +67,7 @@ def run_scene(args, split, scene_dir, cache):
            "probe_px": meta["camera"]["probe_px"], "elevation_deg": meta["camera"]["elevation_deg"],
            "noise": meta["noise"], "exposure_clip": meta["exposure_clip"], "quality": args.quality,
            "threads": args.threads, "alp_sha256": args.alp_sha[:12], "known_pose": args.known_pose,
+           "estimate_args": args.estimate_args,
            "inputs": args.inputs,
            "load_1m": round(os.getloadavg()[0], 2)}
     image, mask = INPUTS[args.inputs]
@@ -83,6 +84,7 @@ def run_scene(args, split, scene_dir, cache):
            "--threads", str(args.threads), "--seed", "0"]
     if args.known_pose:
         cmd += ["--pose", os.path.join(scene_dir, "pose.json")]
+    cmd += args.estimate_args.split()
     try:
         _, wall, rss, cpu = es.run(cmd, cwd=args.out, log_path=est_dir + ".estimate.log")
         rec.update(wall_s=round(wall, 3), cpu_s=round(cpu, 3), max_rss_mb=round(rss, 1))
@@ -152,6 +154,8 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", default=None, help="results folder (default BENCH/results/QUALITY)")
     ap.add_argument("--only", default="", help="keep scenes whose name contains one of these (comma-separated)")
+    ap.add_argument("--estimate-args", default="",
+                    help="more flags for every alp estimate, e.g. \"--rounds 2\" (a settings variant)")
     ap.add_argument("--eval-spp", type=int, default=256, help="alp eval --spp")
     ap.add_argument("--known-pose", action="store_true",
                     help="give the estimate each scene's true pose (pose.json): the lighting alone is measured")
@@ -168,8 +172,9 @@ def main():
     if os.path.exists(results):
         with open(results) as f:
             existing = [json.loads(line) for line in f if line.strip()]
-    same_run = lambda r: (r["alp_sha256"], r["quality"], r.get("known_pose", False), r.get("inputs", "exact")) == (
-        args.alp_sha[:12], args.quality, args.known_pose, args.inputs)
+    same_run = lambda r: (r["alp_sha256"], r["quality"], r.get("known_pose", False), r.get("inputs", "exact"),
+                          r.get("estimate_args", "")) == (
+        args.alp_sha[:12], args.quality, args.known_pose, args.inputs, args.estimate_args)
     kept = {(r["split"], r["scene"]): r for r in existing if same_run(r)}
     cache_path = os.path.join(args.out, "eval_cache.json")
     cache = json.load(open(cache_path)) if os.path.exists(cache_path) else {}

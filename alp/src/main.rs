@@ -383,7 +383,7 @@ fn demo(out: &Path) -> Result<()> {
     );
     println!("Look at {}", shown.join("index.html").display());
     println!("  scene/     the photo, its mask, camera, true pose and map");
-    println!("  estimate/  env.exr, pose.json, confidence.exr, rerender.exr, report.json");
+    println!("  estimate/  env.exr, pose.json, confidence.exr, rerender.exr, mask_found.png, report.json");
     println!("  report.json, and the figures as PNG");
     Ok(())
 }

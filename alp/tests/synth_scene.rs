@@ -332,42 +332,69 @@ fn synth_inputs_writes_the_inputs_people_have_and_the_estimate_reads_them() {
         assert_eq!(&read(f), before, "{f} differs between runs of one seed");
     }
     // The estimate of the JPEG finds its clipped white; of the blurred photo, its blur.
-    let run = |image: &str, name: &str| -> serde_json::Value {
-        let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
-        let (image, mask, camera, out) = (
-            s(&scene.join(image)),
-            s(&scene.join("mask.png")),
-            s(&scene.join("camera.json")),
-            s(&dir.join(name)),
-        );
-        let args = [
-            "estimate",
-            "--image",
-            &image,
-            "--mask",
-            &mask,
-            "--camera",
-            &camera,
-            "--probe",
-            "can",
-            "--out",
-            &out,
-            "--quality",
-            "fast",
-            "--threads",
-            "1",
-        ];
-        let run = alp(&args);
+    let s = |p: &Path| p.to_str().expect("utf-8").to_owned();
+    let (mask, camera) = (s(&scene.join("mask.png")), s(&scene.join("camera.json")));
+    let box_text = String::from_utf8(read("box.txt")).expect("utf-8").trim().to_owned();
+    let estimate = |image: &str, region: [&str; 2], name: &str, extra: &[&str]| -> Output {
+        let (image, out) = (s(&scene.join(image)), s(&dir.join(name)));
+        let mut args = vec!["estimate", "--image", &image, region[0], region[1]];
+        args.extend(["--probe", "can", "--out", &out, "--quality", "fast", "--threads", "1"]);
+        args.extend(extra);
+        alp(&args)
+    };
+    let run = |image: &str, region: [&str; 2], name: &str| -> serde_json::Value {
+        let run = estimate(image, region, name, &["--camera", &camera]);
         assert!(run.status.success(), "{}", stderr(&run));
         serde_json::from_slice(&std::fs::read(dir.join(name).join("report.json")).expect("report")).expect("JSON")
     };
-    let jpeg = run("image.jpg", "from-jpeg");
+    // A box in place of the mask: the outline found covers the probe's.
+    run("image.exr", ["--box", &box_text], "from-box");
+    let found = Mask::read_png(dir.join("from-box").join("mask_found.png")).expect("mask_found.png");
+    let both = found
+        .inside
+        .iter()
+        .zip(&exact.inside)
+        .filter(|(a, b)| **a && **b)
+        .count();
+    let either = found
+        .inside
+        .iter()
+        .zip(&exact.inside)
+        .filter(|(a, b)| **a || **b)
+        .count();
+    assert!(
+        both as f64 > 0.8 * either as f64,
+        "the outline found overlaps the probe's by {both} of {either} pixels"
+    );
+    // A mask and a box at once, a bad box, and a photo without EXIF and no
+    // --camera are errors that write nothing.
+    for (region, extra, says, name) in [
+        (
+            ["--box", "1,2,3"],
+            vec!["--camera", camera.as_str()],
+            "--box",
+            "bad-box",
+        ),
+        (
+            ["--box", &box_text],
+            vec!["--mask", mask.as_str(), "--camera", camera.as_str()],
+            "--mask",
+            "both",
+        ),
+        (["--mask", &mask], vec![], "--camera", "no-camera"),
+    ] {
+        let out = estimate("image.exr", region, name, &extra);
+        assert!(!out.status.success(), "{name}");
+        assert!(stderr(&out).contains(says), "{name}: {}", stderr(&out));
+        assert!(!dir.join(name).exists(), "{name}: written");
+    }
+    let jpeg = run("image.jpg", ["--mask", &mask], "from-jpeg");
     assert!(
         jpeg["clipped_pixels"].as_u64().expect("clipped") > 0,
         "{}",
         jpeg["clipped_pixels"]
     );
-    let blurred = run("image_blur.exr", "from-blur");
+    let blurred = run("image_blur.exr", ["--mask", &mask], "from-blur");
     let (found, drawn_blur) = (
         blurred["blur"]["blur_px"].as_f64().expect("blur"),
         drawn["blur_px"].as_f64().expect("drawn blur"),

@@ -40,6 +40,7 @@ pub mod bsdf;
 pub mod camera;
 pub mod envmap;
 pub mod error;
+pub mod exif_camera;
 pub mod image_io;
 pub mod integrator;
 mod json;

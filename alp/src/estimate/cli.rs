@@ -7,12 +7,14 @@ use std::sync::Arc;
 use render::RenderError;
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
+use render::exif_camera::camera_from_exif;
 use render::image_io::{Mask, PhotoEncoding, RgbImage};
 use render::pose::Pose;
 
 use crate::error::{Error, Result};
 
 use super::lighting::LightingMethod;
+use super::probe_box::{ProbeBox, mask_in_box};
 use super::settings::ADAM_LIGHTING;
 use super::{Estimate, Photo, Quality, Settings, estimate_with};
 use crate::objective::Objective;
@@ -24,11 +26,19 @@ pub struct EstimateArgs {
     #[arg(long)]
     pub image: PathBuf,
     /// The probe's mask: an 8-bit image (PNG), grey or colour > 127 marks the probe (opaque pixels only, when it has alpha).
+    /// A hint: the photo decides the outline (`mask_found.png`).
+    #[arg(long, required_unless_present = "probe_box", conflicts_with = "probe_box")]
+    pub mask: Option<PathBuf>,
+    /// Instead of --mask: a box round the probe, x0,y0,x1,y1 (pixel edges,
+    /// x1 and y1 one past its last column and row); its first outline is
+    /// split from the background by colour inside the box.
+    #[arg(long = "box", value_name = "X0,Y0,X1,Y1")]
+    pub probe_box: Option<String>,
+    /// camera.json of the photo; default: the photo's own camera from its
+    /// EXIF tags (a JPEG's or PNG's focal length), at the origin looking
+    /// along -z, +y up.
     #[arg(long)]
-    pub mask: PathBuf,
-    /// camera.json of the photo.
-    #[arg(long)]
-    pub camera: PathBuf,
+    pub camera: Option<PathBuf>,
     /// Probe folder (probe.json), or a procedural probe name (can, cap, sphere).
     #[arg(long)]
     pub probe: PathBuf,
@@ -115,7 +125,8 @@ pub(crate) fn parse_size(s: &str) -> Result<(usize, usize)> {
 }
 
 /// Runs the estimation and writes `env.exr`, `pose.json`, `confidence.exr`,
-/// `rerender.exr`, `preview.png` and `report.json` into `--out`.
+/// `rerender.exr`, `mask_found.png`, `preview.png`, `report.json` and
+/// `camera.json` into `--out`.
 pub fn run(args: &EstimateArgs) -> Result<()> {
     let mut settings = Settings::new(parse_quality(&args.quality)?);
     settings.seed = args.seed;
@@ -140,9 +151,27 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     if let Some(path) = &args.objective {
         settings.objective = Arc::new(Objective::from_file(path)?);
     }
-    let camera = Camera::read(&args.camera)?;
     let (image, encoding) = read_photo(&args.image)?;
-    let mask = Mask::read_png(&args.mask)?;
+    let camera = match &args.camera {
+        Some(path) => Camera::read(path)?,
+        None => {
+            let camera = camera_from_exif(&args.image, image.width as u32, image.height as u32)?;
+            eprintln!(
+                "alp: the camera from {}'s EXIF: vertical field of view {:.2} deg, at the origin looking along -z",
+                args.image.display(),
+                camera.fov_y_deg
+            );
+            camera
+        }
+    };
+    let mask = match (&args.mask, &args.probe_box) {
+        (Some(path), _) => Mask::read_png(path)?,
+        (None, Some(text)) => {
+            let probe_box = ProbeBox::parse(text, image.width, image.height)?;
+            mask_in_box(&image, &probe_box, &settings.photo.probe_box)?
+        }
+        (None, None) => return Err(Error::invalid("--mask", "give the probe's mask, or --box round it")),
+    };
     let photo = Photo::new(image, mask, camera)
         .map_err(|e| e.in_file(&args.image))?
         .with_encoding(encoding);
@@ -172,13 +201,20 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         }
         eprintln!("  PSNR {:.2} dB, {:.2} s", result.report.psnr_db, result.report.wall_s);
     }
-    crate::output::write_folder_atomically(&args.out, |dir| write_estimate(dir, &photo.image, &result))
+    crate::output::write_folder_atomically(&args.out, |dir| {
+        write_estimate(dir, &photo.image, &result)?;
+        // The camera it used, for `alp insert` and `alp render` (the EXIF's
+        // when no --camera was given).
+        photo.camera.write(dir.join("camera.json")).map_err(Into::into)
+    })
 }
 
 /// Writes an estimate's files into `dir`: `env.exr`, `pose.json`,
-/// `confidence.exr`, `rerender.exr`, `preview.png` and `report.json`.
+/// `confidence.exr`, `rerender.exr`, `mask_found.png`, `preview.png` and
+/// `report.json`.
 pub(crate) fn write_estimate(dir: &Path, photo: &RgbImage, result: &Estimate) -> Result<()> {
     result.env.write(dir.join("env.exr"))?;
+    result.outline.write_png(dir.join("mask_found.png"))?;
     result.pose.write(dir.join("pose.json"))?;
     result.confidence.write(dir.join("confidence.exr"))?;
     result.rerender.write_exr(dir.join("rerender.exr"))?;

@@ -26,6 +26,7 @@ pub mod lighting;
 pub mod orientation;
 pub mod photo;
 pub mod pose_search;
+pub mod probe_box;
 pub mod ranking;
 pub mod report;
 pub mod settings;
@@ -37,6 +38,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use render::bsdf::{Bsdf, GgxMetal};
+use render::envmap::EnvMap;
 use render::integrator::{RenderSettings, render_image};
 use render::mesh::EdgeAdjacency;
 use render::probe::ProbeAsset;
@@ -182,6 +184,21 @@ pub fn estimate_with(
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
     let (env, confidence) = fit.output_maps(sizes.work, out_size)?;
+    // The probe's outline at the found pose (`mask_found.png`): the sharp
+    // camera's pixels it covers at least half of.
+    let outline = {
+        let sharp = full.camera.with_footprint(0.0)?;
+        let coverage = RenderSettings { spp: 4, seed: 0 };
+        render_image(
+            asset,
+            &judged.pose,
+            &sharp,
+            &EnvMap::constant(8, [0.0; 3]),
+            bsdf,
+            &coverage,
+        )
+        .1
+    };
     let rerender = match working.photo {
         None => fit.rerender(),
         // The fit's pixels are blocks of the photo's: the photo's own size
@@ -230,6 +247,7 @@ pub fn estimate_with(
             (None, Some(_)) => symmetry::turned_back(&judged.pose, to_y),
         },
         rerender,
+        outline,
         report,
     })
 }

@@ -68,6 +68,11 @@ impl Photo {
         Ok(Photo { camera, ..self })
     }
 
+    /// The photo with another mask, checked as [`Photo::new`] checks it.
+    pub fn with_mask(self, mask: Mask) -> Result<Self> {
+        Ok(Photo::new(self.image, mask, self.camera)?.with_encoding(self.encoding))
+    }
+
     /// The photo, its values stored as `encoding` says.
     pub fn with_encoding(self, encoding: PhotoEncoding) -> Self {
         Photo { encoding, ..self }

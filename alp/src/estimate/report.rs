@@ -3,7 +3,7 @@
 //! bar follows while the phases run.
 
 use render::envmap::EnvMap;
-use render::image_io::RgbImage;
+use render::image_io::{Mask, RgbImage};
 use render::pose::Pose;
 use serde::Serialize;
 
@@ -23,6 +23,9 @@ pub struct Estimate {
     pub pose: Pose,
     /// The photo re-rendered with the estimate.
     pub rerender: RgbImage,
+    /// The probe's outline at the found pose (the pixels it covers at
+    /// least half of): the mask the photo decided on, `mask_found.png`.
+    pub outline: Mask,
     /// The account of the run.
     pub report: Report,
 }

@@ -85,6 +85,33 @@ pub struct PhotoSettings {
     pub blur_px: Option<f32>,
     /// How the blur is measured on the probe's edges.
     pub blur: BlurSettings,
+    /// How a box round the probe (`alp estimate --box`) gives its first
+    /// outline.
+    pub probe_box: BoxSettings,
+}
+
+/// The probe's first outline from a box round it (`estimate::probe_box`).
+#[derive(Clone, Debug, Serialize)]
+pub struct BoxSettings {
+    /// The background's colours are read in a band this wide (pixels)
+    /// round the box.
+    pub ring_px: usize,
+    /// At most this many of them are kept (evenly spread): time against
+    /// colours missed.
+    pub background_colours: usize,
+    /// A pixel further than this (natural-log colour distance) from every
+    /// background colour seeds the probe: lower seeds more of a probe
+    /// whose reflection is near the background's colours, and more of the
+    /// background's own texture inside the box.
+    pub unlike_background: f64,
+    /// Without such pixels, the ellipse that seeds the probe at the box's
+    /// centre spans this share of the box each way: larger holds a probe
+    /// of dark and bright parts together, but may reach past a thin
+    /// probe's outline.
+    pub centre_seed: f64,
+    /// Colours below this share of the box's mean level count as that
+    /// level in the colour steps: dark noise does not cut the probe.
+    pub dark_floor: f64,
 }
 
 /// The photo's blur measured on the probe's edges (`estimate::blur`).
@@ -112,6 +139,8 @@ pub struct BlurSettings {
     /// Profiles are divided by their level plus this share of the photo's.
     pub dark_level: f64,
     /// A blur below this (pixels) is none: the renders keep a sharp camera.
+    /// Sharp photos measure up to 0.9 px (a mirror's limb is soft), and a
+    /// blur modelled where there is none costs more than one left out.
     pub min_blur_px: f32,
 }
 
@@ -402,7 +431,14 @@ impl Default for Settings {
                     max_residual: 0.1,
                     min_edges: 20,
                     dark_level: 0.05,
-                    min_blur_px: 0.5,
+                    min_blur_px: 1.0,
+                },
+                probe_box: BoxSettings {
+                    ring_px: 4,
+                    background_colours: 2048,
+                    unlike_background: 0.3,
+                    centre_seed: 0.2,
+                    dark_floor: 0.02,
                 },
                 rerender_spp: 8,
             },

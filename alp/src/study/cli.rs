@@ -59,7 +59,7 @@ pub struct StabilityArgs {
     /// The perturbations and ablations to run, comma-separated (default:
     /// all of mask_erode, mask_dilate, mask_traced, mask_segmenter, noise,
     /// clip, exposure_under, exposure_over, border, small, blur, jpeg,
-    /// one_start, no_pose_priors, no_light_smoothness, joint_rounds).
+    /// box, one_start, no_pose_priors, no_light_smoothness, joint_rounds).
     #[arg(long, value_delimiter = ',')]
     pub perturbations: Option<Vec<String>>,
 }

@@ -1,6 +1,7 @@
 //! What breaks methods, done to a photo at a given strength (`alp study
 //! stability`): a mask a few pixels off, sensor noise, clipped highlights, a
-//! wrong exposure, a probe cut by the border, a small probe, blur.
+//! wrong exposure, a probe cut by the border, a small probe, blur, a JPEG,
+//! a box in place of the mask.
 
 use render::camera::Camera;
 use render::image_io::{Mask, PhotoEncoding, RgbImage};
@@ -9,6 +10,8 @@ use render::silhouette::distance_transform;
 
 use crate::error::{Error, Result};
 use crate::estimate::Photo;
+use crate::estimate::probe_box::{ProbeBox, mask_in_box};
+use crate::estimate::settings::BoxSettings;
 use crate::synth::standard_normal;
 
 /// The photo's mask grown (`pixels` > 0) or shrunk (< 0) by a disk of that radius.
@@ -95,6 +98,20 @@ pub fn probe_box(mask: &Mask, margins: [f32; 4]) -> Option<[u32; 4]> {
     ])
 }
 
+/// The photo with the mask `alp estimate --box` finds in its probe's box
+/// grown by `margin` pixels each way (`estimate::probe_box`).
+pub fn boxed(photo: &Photo, margin: f32, settings: &BoxSettings) -> Result<Photo> {
+    let [x0, y0, x1, y1] = probe_box(&photo.mask, [margin; 4])
+        .ok_or_else(|| Error::invalid("mask", "is empty: there is no probe to draw a box round"))?;
+    let text = format!("{x0},{y0},{x1},{y1}");
+    let found = mask_in_box(
+        &photo.image,
+        &ProbeBox::parse(&text, photo.mask.width, photo.mask.height)?,
+        settings,
+    )?;
+    with_mask(photo, found)
+}
+
 /// The first and last columns and rows the mask marks, `[x0, y0, x1, y1]`.
 fn bounding_box(mask: &Mask) -> Option<[usize; 4]> {
     let w = mask.width;
@@ -130,7 +147,7 @@ fn outline_moved(mask: &Mask, offset: impl Fn(usize) -> f32) -> Mask {
 
 /// The photo with another mask.
 fn with_mask(photo: &Photo, mask: Mask) -> Result<Photo> {
-    Photo::new(photo.image.clone(), mask, photo.camera)
+    photo.clone().with_mask(mask)
 }
 
 /// Multiplicative Gaussian noise of relative spread `sigma` on every
@@ -394,6 +411,13 @@ mod tests {
         assert_eq!(probe_box(&p.mask, [1.0, 2.0, 3.0, 4.0]), Some([4, 8, 18, 24]));
         assert_eq!(probe_box(&p.mask, [10.0, 20.0, 30.0, 20.0]), Some([0, 0, 40, 30]));
         assert_eq!(probe_box(&Mask::new(4, 4, vec![false; 16]), [1.0; 4]), None);
+    }
+
+    #[test]
+    fn a_box_round_the_square_finds_the_square() {
+        let p = photo();
+        let settings = crate::estimate::settings::Settings::default().photo.probe_box;
+        assert_eq!(boxed(&p, 3.0, &settings).expect("boxed").mask, p.mask);
     }
 
     #[test]

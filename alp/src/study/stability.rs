@@ -6,13 +6,13 @@ use std::sync::Arc;
 
 use crate::error::{Error, Result};
 use crate::estimate::Photo;
-use crate::estimate::settings::yaws;
+use crate::estimate::settings::{Settings, yaws};
 use crate::objective::Objective;
 
 use super::{Perturb, Perturbation, Variant, perturb};
 
 /// The perturbations and ablations, in the order run and charted.
-pub const PERTURBATIONS: [&str; 17] = [
+pub const PERTURBATIONS: [&str; 18] = [
     "mask_erode",
     "mask_dilate",
     "mask_traced",
@@ -25,6 +25,7 @@ pub const PERTURBATIONS: [&str; 17] = [
     "small",
     "blur",
     "jpeg",
+    "box",
     "one_start",
     "no_pose_priors",
     "no_light_smoothness",
@@ -65,6 +66,9 @@ fn graded(name: &str) -> Option<(Vec<f64>, Change)> {
         "small" => (vec![120.0, 80.0, 40.0], |p, s| small(p, s as usize)),
         "blur" => (vec![0.5, 1.0, 2.0], |p, s| blurred(p, s as f32)),
         "jpeg" => (vec![95.0, 85.0, 75.0], |p, s| Ok(jpeg(p, s as u8, JPEG_CLIP_SHARE)?.0)),
+        "box" => (vec![2.0, 5.0, 10.0], |p, s| {
+            boxed(p, s as f32, &Settings::default().photo.probe_box)
+        }),
         _ => return None,
     })
 }
