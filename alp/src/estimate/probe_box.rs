@@ -39,17 +39,27 @@ const MIN_SIDE_PX: usize = 8;
 
 impl ProbeBox {
     /// The box `x0,y0,x1,y1` (pixel edges, as `alp synth inputs` writes
-    /// `box.txt`) in a `width` x `height` photo: inside the photo and at
-    /// least 8 pixels across each way.
+    /// `box.txt`) in a `width` x `height` photo ([`ProbeBox::new`]).
     pub fn parse(text: &str, width: usize, height: usize) -> Result<Self> {
-        let bad = |rule: String| Error::invalid("--box", rule);
+        let malformed = || {
+            Error::invalid(
+                "--box",
+                format!("`{text}` is not x0,y0,x1,y1 (four whole pixel numbers)"),
+            )
+        };
         let values: Vec<usize> = text
             .split(',')
             .map(|v| v.trim().parse::<usize>())
             .collect::<std::result::Result<_, _>>()
-            .map_err(|_| bad(format!("`{text}` is not x0,y0,x1,y1 (four whole pixel numbers)")))?;
-        let [x0, y0, x1, y1] = <[usize; 4]>::try_from(values)
-            .map_err(|_| bad(format!("`{text}` is not x0,y0,x1,y1 (four whole pixel numbers)")))?;
+            .map_err(|_| malformed())?;
+        let corners = <[usize; 4]>::try_from(values).map_err(|_| malformed())?;
+        ProbeBox::new(corners, width, height)
+    }
+
+    /// The box of `[x0, y0, x1, y1]` in a `width` x `height` photo: inside
+    /// the photo and at least 8 pixels across each way.
+    pub fn new([x0, y0, x1, y1]: [usize; 4], width: usize, height: usize) -> Result<Self> {
+        let bad = |rule: String| Error::invalid("--box", rule);
         if x1 > width || y1 > height {
             return Err(bad(format!(
                 "{x0},{y0},{x1},{y1} reaches outside the {width}x{height} photo"

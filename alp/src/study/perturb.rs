@@ -101,14 +101,10 @@ pub fn probe_box(mask: &Mask, margins: [f32; 4]) -> Option<[u32; 4]> {
 /// The photo with the mask `alp estimate --box` finds in its probe's box
 /// grown by `margin` pixels each way (`estimate::probe_box`).
 pub fn boxed(photo: &Photo, margin: f32, settings: &BoxSettings) -> Result<Photo> {
-    let [x0, y0, x1, y1] = probe_box(&photo.mask, [margin; 4])
+    let corners = probe_box(&photo.mask, [margin; 4])
         .ok_or_else(|| Error::invalid("mask", "is empty: there is no probe to draw a box round"))?;
-    let text = format!("{x0},{y0},{x1},{y1}");
-    let found = mask_in_box(
-        &photo.image,
-        &ProbeBox::parse(&text, photo.mask.width, photo.mask.height)?,
-        settings,
-    )?;
+    let probe_box = ProbeBox::new(corners.map(|c| c as usize), photo.mask.width, photo.mask.height)?;
+    let found = mask_in_box(&photo.image, &probe_box, settings)?;
     with_mask(photo, found)
 }
 
