@@ -9,7 +9,8 @@ use render::bsdf::{Bsdf, GgxMetal, Lambertian, Mirror};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::integrator::{
-    LightSamples, LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with, shade,
+    LightSamples, LightSampling, PrimaryHits, ProbeVars, RenderSettings, coverage_mask, light_samples_with,
+    render_image, shade,
 };
 use render::lookup::{ImageVars, TextureVars, image_texels};
 use render::mesh::Mesh;
@@ -276,6 +277,18 @@ fn the_same_seed_gives_the_same_image_on_any_thread_count() {
         let other = image(RenderSettings { seed: 8, ..settings });
         assert!(other != run(1), "{sampling:?}: another seed must give another estimate");
     }
+}
+
+#[test]
+fn the_coverage_mask_is_the_render_s_mask_without_the_shading() {
+    let probe = SodaCan::default().build();
+    let camera = can_camera(30.0);
+    let pose = Pose::new(Quat::from_rotation_z(0.4), 1.0, Vec3::new(0.004, 0.0, 0.0));
+    let settings = RenderSettings { spp: 4, seed: 3 };
+    let mask = coverage_mask(&probe, &pose, &camera, &settings);
+    let rendered = render_image(&probe, &pose, &camera, &studio().downsample(32), &GgxMetal, &settings).1;
+    assert!(mask.count() > 100, "{} pixels", mask.count());
+    assert_eq!(mask, rendered);
 }
 
 /// Two renders (seeds 1 and 2) of the can under `env` by BRDF sampling,

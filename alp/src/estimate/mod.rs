@@ -38,8 +38,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use render::bsdf::{Bsdf, GgxMetal};
-use render::envmap::EnvMap;
-use render::integrator::{RenderSettings, render_image};
+use render::integrator::{RenderSettings, coverage_mask, render_image};
 use render::mesh::EdgeAdjacency;
 use render::probe::ProbeAsset;
 use render::silhouette::ReferenceMask;
@@ -188,16 +187,7 @@ pub fn estimate_with(
     // camera's pixels it covers at least half of.
     let outline = {
         let sharp = full.camera.with_footprint(0.0)?;
-        let coverage = RenderSettings { spp: 4, seed: 0 };
-        render_image(
-            asset,
-            &judged.pose,
-            &sharp,
-            &EnvMap::constant(8, [0.0; 3]),
-            bsdf,
-            &coverage,
-        )
-        .1
+        coverage_mask(asset, &judged.pose, &sharp, &RenderSettings { spp: 4, seed: 0 })
     };
     let rerender = match working.photo {
         None => fit.rerender(),
