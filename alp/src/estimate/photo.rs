@@ -250,14 +250,14 @@ fn clipped_at_white(photo: &Photo, settings: &PhotoSettings) -> Vec<bool> {
 
 /// Whether pixel `p` (covered by the probe to `coverage`) is data: on the
 /// probe ([`on_probe`]) and not clipped.
-pub(super) fn usable_pixel(photo: &Photo, clipped: &[bool], p: u32, coverage: f32) -> bool {
-    on_probe(photo, p, coverage) && !clipped[p as usize]
+pub(super) fn usable_pixel(clipped: &[bool], p: u32, coverage: f32) -> bool {
+    on_probe(coverage) && !clipped[p as usize]
 }
 
-/// Whether pixel `p` (covered by the probe to `coverage`) is wholly on the
+/// Whether a pixel covered by the probe to `coverage` is wholly on the
 /// probe (a partly covered pixel mixes in the background), whatever the
 /// photo's mask says: the posed probe's outline is the photo's.
-pub(super) fn on_probe(_photo: &Photo, _p: u32, coverage: f32) -> bool {
+pub(super) fn on_probe(coverage: f32) -> bool {
     coverage >= 1.0
 }
 

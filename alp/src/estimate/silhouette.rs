@@ -326,7 +326,7 @@ pub(super) fn fit_pose_to_image(
                 .pixels
                 .iter()
                 .zip(&hits.coverage)
-                .map(|(&p, &c)| f64::from(u8::from(usable_pixel(photo, ctx.clipped, p, c))))
+                .map(|(&p, &c)| f64::from(u8::from(usable_pixel(ctx.clipped, p, c))))
                 .collect();
             let image = ImageTerms::new(&hits.pixels, rendered, &target, &usable, ctx.level)?;
             let span = 1.0 - ctx.outline.progress;

@@ -351,7 +351,7 @@ pub(super) fn pixel_targets(
         let at_least = clipped[p as usize];
         let w = match (purpose, at_least) {
             (LightingPurpose::Search, true) => [0.0; 3],
-            _ if !on_probe(photo, p, c) => [0.0; 3],
+            _ if !on_probe(c) => [0.0; 3],
             (LightingPurpose::Search, false) => [relative(luminance(px)); 3],
             (LightingPurpose::Output, _) => px.map(relative),
         };
