@@ -2,7 +2,9 @@
 //!
 //! A manifest holds one JSON object per line, `{"id", "image", "mask",
 //! "camera", "probe"}` (paths absolute or relative to the manifest's folder)
-//! with optional `"quality"`, `"seed"` and `"env_size"`. Each estimate lands
+//! with optional `"quality"`, `"seed"` and `"env_size"`; `"box":
+//! "x0,y0,x1,y1"` may stand for the mask (as `alp estimate --box`) and a
+//! photo without `"camera"` is read with its EXIF's. Each estimate lands
 //! in `OUT/<id>/`, written whole or not at all, so a folder that exists is a
 //! finished photo: `--resume` skips those and retries the rest. `--shard I/N`
 //! takes the lines whose 0-based index is I modulo N (broken lines count, so
@@ -20,12 +22,10 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use render::RenderError;
-use render::camera::Camera;
-use render::image_io::Mask;
 
 use crate::error::{Error, Result};
-use crate::estimate::cli::{parse_quality, parse_size, read_photo, write_estimate};
-use crate::estimate::{Photo, Settings, estimate};
+use crate::estimate::cli::{ProbeMarking, parse_quality, parse_size, read_inputs, write_estimate};
+use crate::estimate::{Settings, estimate};
 
 /// One line of the manifest.
 #[derive(Clone, Debug, Deserialize)]
@@ -35,10 +35,15 @@ pub struct Entry {
     pub id: String,
     /// The photo (any format `alp estimate` reads).
     pub image: PathBuf,
-    /// The probe's mask.
-    pub mask: PathBuf,
-    /// camera.json.
-    pub camera: PathBuf,
+    /// The probe's mask (or `box`).
+    #[serde(default)]
+    pub mask: Option<PathBuf>,
+    /// Instead of `mask`: a box round the probe, `x0,y0,x1,y1`.
+    #[serde(default, rename = "box")]
+    pub probe_box: Option<String>,
+    /// camera.json (default: the photo's EXIF).
+    #[serde(default)]
+    pub camera: Option<PathBuf>,
     /// Probe folder or procedural name.
     pub probe: PathBuf,
     /// fast, default or best (default: default).
@@ -207,7 +212,7 @@ fn parse_entry(raw: &str, seen: &mut HashSet<String>) -> Result<Entry> {
     let entry: Entry = serde_json::from_str(raw).map_err(|e| {
         Error::invalid(
             "manifest line",
-            format!("{e} (fields: id, image, mask, camera, probe; optional quality, seed, env_size)"),
+            format!("{e} (fields: id, image, mask or box, probe; optional camera, quality, seed, env_size)"),
         )
     })?;
     let safe = |c: char| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-');
@@ -237,10 +242,19 @@ fn estimate_one(entry: &Entry, base: &Path, dir: &Path) -> Result<f64> {
     if let Some(size) = &entry.env_size {
         settings.env_size = parse_size(size)?;
     }
-    let image_path = path(&entry.image);
-    let (image, encoding) = read_photo(&image_path)?;
-    let mask = Mask::read_png(path(&entry.mask))?;
-    let camera = Camera::read(path(&entry.camera))?;
+    let mask = entry.mask.as_deref().map(path);
+    let marking = match (&mask, &entry.probe_box) {
+        (Some(mask), None) => ProbeMarking::Mask(mask),
+        (None, Some(text)) => ProbeMarking::Box { text, field: "box" },
+        _ => {
+            return Err(Error::invalid(
+                "mask",
+                "give the probe's mask or a box round it (not both)",
+            ));
+        }
+    };
+    let camera = entry.camera.as_deref().map(path);
+    let photo = read_inputs(&path(&entry.image), marking, camera.as_deref(), &settings)?;
     let probe_path = path(&entry.probe);
     // A procedural name stays a name unless a folder of that name sits beside the manifest.
     let probe = if probe_path.exists() {
@@ -248,11 +262,8 @@ fn estimate_one(entry: &Entry, base: &Path, dir: &Path) -> Result<f64> {
     } else {
         crate::probes::load(&entry.probe)?
     };
-    let photo = Photo::new(image, mask, camera)
-        .map_err(|e| e.in_file(&image_path))?
-        .with_encoding(encoding);
     let result = estimate(&photo, &probe, &settings)?;
-    crate::output::write_folder_atomically(dir, |tmp| write_estimate(tmp, &photo.image, &result))?;
+    crate::output::write_folder_atomically(dir, |tmp| write_estimate(tmp, &photo, &result))?;
     Ok(result.report.psnr_db)
 }
 
@@ -325,7 +336,8 @@ pub fn merge(out: &Path) -> Result<Vec<Outcome>> {
 #[derive(clap::Args, Debug)]
 pub struct BatchArgs {
     /// The manifest: one JSON object per line, {"id", "image", "mask", "camera", "probe"}
-    /// (paths absolute or relative to the manifest), optional "quality", "seed", "env_size".
+    /// (paths absolute or relative to the manifest; "box": "x0,y0,x1,y1" instead of "mask"; no
+    /// "camera": the photo's EXIF), optional "quality", "seed", "env_size".
     #[arg(long, required_unless_present = "merge", conflicts_with = "merge")]
     pub manifest: Option<PathBuf>,
     /// Output folder: `OUT/<id>/` per photo, `OUT/summary-I-of-N.jsonl` per shard.

@@ -207,3 +207,79 @@ fn shards_resume_and_broken_lines() {
     }
     std::fs::remove_dir_all(&dir).expect("clean up");
 }
+
+#[test]
+fn a_box_may_stand_for_the_mask_and_the_photo_s_exif_for_the_camera_file() {
+    let dir = std::env::temp_dir().join(format!("alp-batch-box-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let env = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
+    let scene = dir.join("s0");
+    let made = alp(&[
+        "synth",
+        "--probe",
+        "can",
+        "--env",
+        s(&env),
+        "--out",
+        s(&scene),
+        "--width",
+        "96",
+        "--height",
+        "72",
+        "--spp",
+        "16",
+    ]);
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    // A box 3 px loose round the mask.
+    let mask = render::image_io::Mask::read_png(scene.join("mask.png")).expect("mask");
+    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+    for i in (0..mask.inside.len()).filter(|&i| mask.inside[i]) {
+        let (x, y) = (i % mask.width, i / mask.width);
+        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+    }
+    let probe_box = format!(
+        "{},{},{},{}",
+        x0.saturating_sub(3),
+        y0.saturating_sub(3),
+        (x1 + 3).min(mask.width),
+        (y1 + 3).min(mask.height)
+    );
+    let lines = [
+        format!(
+            r#"{{"id": "boxed", "image": "s0/image.exr", "box": "{probe_box}", "camera": "s0/camera.json", "probe": "can", "quality": "fast"}}"#
+        ),
+        format!(
+            r#"{{"id": "both", "image": "s0/image.exr", "mask": "s0/mask.png", "box": "{probe_box}", "camera": "s0/camera.json", "probe": "can"}}"#
+        ),
+        r#"{"id": "no-camera", "image": "s0/image.exr", "mask": "s0/mask.png", "probe": "can"}"#.to_string(),
+        r#"{"id": "bad-box", "image": "s0/image.exr", "box": "5,5,2,2", "camera": "s0/camera.json", "probe": "can"}"#
+            .to_string(),
+    ];
+    let manifest = dir.join("manifest.jsonl");
+    std::fs::write(&manifest, lines.join("\n") + "\n").expect("manifest");
+    let out = dir.join("out");
+    let run = alp(&["batch", "--manifest", s(&manifest), "--out", s(&out), "--threads", "2"]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(
+        statuses(&out.join("summary-0-of-1.jsonl")),
+        vec![
+            pair("boxed", "done"),
+            pair("both", "failed"),
+            pair("no-camera", "failed"),
+            pair("bad-box", "failed")
+        ],
+        "{stderr}"
+    );
+    // Each failure names its rule: both marks, the missing EXIF, the box field.
+    for rule in ["not both", "--camera", "field `box`"] {
+        assert!(stderr.contains(rule), "{rule}: {stderr}");
+    }
+    for file in ["mask_found.png", "camera.json", "pose.json", "env.exr"] {
+        assert!(out.join("boxed").join(file).exists(), "{file}");
+    }
+    for id in ["both", "no-camera", "bad-box"] {
+        assert!(!out.join(id).exists(), "{id}: a failed photo left a folder");
+    }
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}

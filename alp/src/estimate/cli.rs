@@ -151,30 +151,12 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     if let Some(path) = &args.objective {
         settings.objective = Arc::new(Objective::from_file(path)?);
     }
-    let (image, encoding) = read_photo(&args.image)?;
-    let camera = match &args.camera {
-        Some(path) => Camera::read(path)?,
-        None => {
-            let camera = camera_from_exif(&args.image, image.width as u32, image.height as u32)?;
-            eprintln!(
-                "alp: the camera from {}'s EXIF: vertical field of view {:.2} deg, at the origin looking along -z",
-                args.image.display(),
-                camera.fov_y_deg
-            );
-            camera
-        }
-    };
-    let mask = match (&args.mask, &args.probe_box) {
-        (Some(path), _) => Mask::read_png(path)?,
-        (None, Some(text)) => {
-            let probe_box = ProbeBox::parse(text, image.width, image.height)?;
-            mask_in_box(&image, &probe_box, &settings.photo.probe_box)?
-        }
+    let marking = match (&args.mask, &args.probe_box) {
+        (Some(path), _) => ProbeMarking::Mask(path),
+        (None, Some(text)) => ProbeMarking::Box { text, field: "--box" },
         (None, None) => return Err(Error::invalid("--mask", "give the probe's mask, or --box round it")),
     };
-    let photo = Photo::new(image, mask, camera)
-        .map_err(|e| e.in_file(&args.image))?
-        .with_encoding(encoding);
+    let photo = read_inputs(&args.image, marking, args.camera.as_deref(), &settings)?;
     let probe = crate::probes::load(&args.probe)?;
     let pool = thread_pool(args.threads)?;
     let verbose = std::io::stderr().is_terminal();
@@ -201,24 +183,64 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         }
         eprintln!("  PSNR {:.2} dB, {:.2} s", result.report.psnr_db, result.report.wall_s);
     }
-    crate::output::write_folder_atomically(&args.out, |dir| {
-        write_estimate(dir, &photo.image, &result)?;
-        // The camera it used, for `alp insert` and `alp render` (the EXIF's
-        // when no --camera was given).
-        photo.camera.write(dir.join("camera.json")).map_err(Into::into)
-    })
+    crate::output::write_folder_atomically(&args.out, |dir| write_estimate(dir, &photo, &result))
+}
+
+/// What marks the probe in the photo, as the user gives it.
+pub(crate) enum ProbeMarking<'a> {
+    /// A mask image.
+    Mask(&'a Path),
+    /// A box round it, `x0,y0,x1,y1`, given as `field` (its errors name it).
+    Box { text: &'a str, field: &'a str },
+}
+
+/// The photo at `image` as the user gives it: the probe marked by a mask
+/// or a box (its first outline then found by colour inside it,
+/// [`mask_in_box`]), the camera from `camera` or else the image's EXIF.
+pub(crate) fn read_inputs(
+    image_path: &Path,
+    marking: ProbeMarking,
+    camera: Option<&Path>,
+    settings: &Settings,
+) -> Result<Photo> {
+    let (image, encoding) = read_photo(image_path)?;
+    let camera = match camera {
+        Some(path) => Camera::read(path)?,
+        None => {
+            let camera = camera_from_exif(image_path, image.width as u32, image.height as u32)?;
+            eprintln!(
+                "alp: the camera from {}'s EXIF: vertical field of view {:.2} deg, at the origin looking along -z",
+                image_path.display(),
+                camera.fov_y_deg
+            );
+            camera
+        }
+    };
+    let mask = match marking {
+        ProbeMarking::Mask(path) => Mask::read_png(path)?,
+        ProbeMarking::Box { text, field } => {
+            let probe_box =
+                ProbeBox::parse(text, image.width, image.height).map_err(|e| Error::invalid(field, e.rule()))?;
+            mask_in_box(&image, &probe_box, &settings.photo.probe_box)?
+        }
+    };
+    Ok(Photo::new(image, mask, camera)
+        .map_err(|e| e.in_file(image_path))?
+        .with_encoding(encoding))
 }
 
 /// Writes an estimate's files into `dir`: `env.exr`, `pose.json`,
-/// `confidence.exr`, `rerender.exr`, `mask_found.png`, `preview.png` and
-/// `report.json`.
-pub(crate) fn write_estimate(dir: &Path, photo: &RgbImage, result: &Estimate) -> Result<()> {
+/// `confidence.exr`, `rerender.exr`, `mask_found.png`, `preview.png`,
+/// `report.json` and `camera.json` (the camera it used, the EXIF's when
+/// none was given: for `alp insert` and `alp render`).
+pub(crate) fn write_estimate(dir: &Path, photo: &Photo, result: &Estimate) -> Result<()> {
+    photo.camera.write(dir.join("camera.json"))?;
     result.env.write(dir.join("env.exr"))?;
     result.outline.write_png(dir.join("mask_found.png"))?;
     result.pose.write(dir.join("pose.json"))?;
     result.confidence.write(dir.join("confidence.exr"))?;
     result.rerender.write_exr(dir.join("rerender.exr"))?;
-    preview(photo, &result.rerender, &result.env.to_image()).write_png_preview(dir.join("preview.png"), 0.0)?;
+    preview(&photo.image, &result.rerender, &result.env.to_image()).write_png_preview(dir.join("preview.png"), 0.0)?;
     let json = serde_json::to_string_pretty(&result.report)
         .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
     std::fs::write(dir.join("report.json"), json + "\n")
