@@ -523,7 +523,7 @@ impl Default for Settings {
             },
             pose_search: PoseSearchSettings {
                 lean_step_deg: 0.3,
-                lean_reach_deg: 9.6,
+                lean_reach_deg: 2.4,
                 search_margin_db: 0.3,
                 photo_refine_px: 5_000,
                 photo_refine_rounds: 3,
