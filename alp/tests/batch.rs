@@ -35,33 +35,43 @@ fn pair(id: &str, status: &str) -> (String, String) {
     (id.to_string(), status.to_string())
 }
 
-#[test]
-fn shards_resume_and_broken_lines() {
-    let dir = std::env::temp_dir().join(format!("alp-batch-{}", std::process::id()));
+/// An empty folder of the system's temp dir, named `name` and this process.
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// A 96x72 scene of `probe` under the studio map, from `seed`, written to `scene`.
+fn synth_scene(scene: &Path, probe: &str, seed: usize) {
     let env = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
+    let seed = seed.to_string();
+    let made = alp(&[
+        "synth",
+        "--probe",
+        probe,
+        "--env",
+        s(&env),
+        "--out",
+        s(scene),
+        "--seed",
+        &seed,
+        "--width",
+        "96",
+        "--height",
+        "72",
+        "--spp",
+        "16",
+    ]);
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+}
+
+#[test]
+fn shards_resume_and_broken_lines() {
+    let dir = fresh_dir("alp-batch");
     for (i, probe) in ["can", "cap", "can"].iter().enumerate() {
-        let scene = dir.join(format!("s{i}"));
-        let seed = i.to_string();
-        let made = alp(&[
-            "synth",
-            "--probe",
-            probe,
-            "--env",
-            s(&env),
-            "--out",
-            s(&scene),
-            "--seed",
-            &seed,
-            "--width",
-            "96",
-            "--height",
-            "72",
-            "--spp",
-            "16",
-        ]);
-        assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+        synth_scene(&dir.join(format!("s{i}")), probe, i);
     }
     let line = |id: &str, scene: &str, probe: &str| {
         format!(
@@ -210,27 +220,9 @@ fn shards_resume_and_broken_lines() {
 
 #[test]
 fn a_box_may_stand_for_the_mask_and_the_photo_s_exif_for_the_camera_file() {
-    let dir = std::env::temp_dir().join(format!("alp-batch-box-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let env = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
+    let dir = fresh_dir("alp-batch-box");
     let scene = dir.join("s0");
-    let made = alp(&[
-        "synth",
-        "--probe",
-        "can",
-        "--env",
-        s(&env),
-        "--out",
-        s(&scene),
-        "--width",
-        "96",
-        "--height",
-        "72",
-        "--spp",
-        "16",
-    ]);
-    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    synth_scene(&scene, "can", 0);
     // A box 3 px loose round the mask.
     let mask = render::image_io::Mask::read_png(scene.join("mask.png")).expect("mask");
     let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
