@@ -225,18 +225,8 @@ fn a_box_may_stand_for_the_mask_and_the_photo_s_exif_for_the_camera_file() {
     synth_scene(&scene, "can", 0);
     // A box 3 px loose round the mask.
     let mask = render::image_io::Mask::read_png(scene.join("mask.png")).expect("mask");
-    let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-    for i in (0..mask.inside.len()).filter(|&i| mask.inside[i]) {
-        let (x, y) = (i % mask.width, i / mask.width);
-        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
-    }
-    let probe_box = format!(
-        "{},{},{},{}",
-        x0.saturating_sub(3),
-        y0.saturating_sub(3),
-        (x1 + 3).min(mask.width),
-        (y1 + 3).min(mask.height)
-    );
+    let [x0, y0, x1, y1] = alp::study::perturb::probe_box(&mask, [3.0; 4]).expect("a probe");
+    let probe_box = format!("{x0},{y0},{x1},{y1}");
     let lines = [
         format!(
             r#"{{"id": "boxed", "image": "s0/image.exr", "box": "{probe_box}", "camera": "s0/camera.json", "probe": "can", "quality": "fast"}}"#

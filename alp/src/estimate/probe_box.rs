@@ -18,6 +18,7 @@ use std::collections::BinaryHeap;
 
 use render::image_io::{Mask, RgbImage};
 
+use super::photo::Pixels;
 use super::settings::BoxSettings;
 use crate::error::{Error, Result};
 
@@ -262,15 +263,7 @@ fn watershed(region: &Region, mut label: Vec<u8>) -> Vec<u8> {
 
 /// The 4-neighbours of pixel `i` in a `w` x `h` grid.
 fn neighbours(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
-    let (x, y) = (i % w, i / w);
-    [
-        (x > 0).then(|| i - 1),
-        (x + 1 < w).then(|| i + 1),
-        (y > 0).then(|| i - w),
-        (y + 1 < h).then(|| i + w),
-    ]
-    .into_iter()
-    .flatten()
+    Pixels::All.neighbours(i, w, h).into_iter().flatten()
 }
 
 /// How hard a path is to take: its highest colour step, then the sum of
@@ -371,12 +364,7 @@ mod tests {
     #[test]
     fn the_probe_in_a_loose_box_is_found_to_within_a_pixel() {
         let (image, truth) = disc_photo(50.0, 42.0, 18.0);
-        let probe_box = ProbeBox {
-            x0: 25,
-            y0: 18,
-            x1: 78,
-            y1: 66,
-        };
+        let probe_box = ProbeBox::new([25, 18, 78, 66], 96, 80).expect("a box");
         let mask = mask_in_box(&image, &probe_box, &Settings::default().photo.probe_box).expect("a mask");
         let wrong = mask.inside.iter().zip(&truth.inside).filter(|(a, b)| a != b).count();
         // The disc's outline has about 2 pi 18 = 113 pixels.
@@ -386,12 +374,7 @@ mod tests {
     #[test]
     fn a_box_of_plain_background_still_gives_a_mask_at_its_centre() {
         let image = RgbImage::filled(40, 40, [0.5; 3]);
-        let probe_box = ProbeBox {
-            x0: 5,
-            y0: 5,
-            x1: 35,
-            y1: 35,
-        };
+        let probe_box = ProbeBox::new([5, 5, 35, 35], 40, 40).expect("a box");
         let mask = mask_in_box(&image, &probe_box, &Settings::default().photo.probe_box).expect("a mask");
         assert!(mask.inside[20 * 40 + 20]);
         assert!(!mask.inside[0] && !mask.inside[5 * 40 + 5]);
