@@ -148,11 +148,20 @@ def draw_scene(split, index):
 
 def make_scene(mi, split, index, folder, spp, sources):
     name, rng, family, pose_kind, light = draw_scene(split, index)
+    return render_scene(mi, rng, folder, spp, sources, split, pose_kind, light,
+                        lambda probe_dir: bp.make_probe(family, rng, probe_dir, am.write_exr),
+                        {"name": name, "split": split, "index": index, "family": family})
+
+
+def render_scene(mi, rng, folder, spp, sources, split, pose_kind, light, put_probe, head):
+    """Draws the rest of a scene from `rng` and writes it to `folder` (whole or not at all):
+    `put_probe(dir)` writes its probe folder there and returns the probe's description; `head`
+    (name, split, index, family) starts scene.json."""
     t0 = time.time()
     tmp = folder + ".tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     os.makedirs(tmp)
-    probe_info = bp.make_probe(family, rng, os.path.join(tmp, "probe"), am.write_exr)
+    probe_info = put_probe(os.path.join(tmp, "probe"))
     pose, tilt = draw_pose(rng, pose_kind, probe_info["centre_m"])
     if light == "bundled":
         source = str(rng.choice(BUNDLED[split]))
@@ -171,7 +180,7 @@ def make_scene(mi, split, index, folder, spp, sources):
     image, alpha = ms.render(mi, probe, pose, cam, env, spp, MAX_DEPTH, seed)
     mask = alpha >= 0.5
     if mask.sum() < 50:
-        sys.exit("%s: the probe covers %d pixels (the draw is broken)" % (name, mask.sum()))
+        sys.exit("%s: the probe covers %d pixels (the draw is broken)" % (head["name"], mask.sum()))
     image = image + (1.0 - alpha[..., None]) * ms.env_background(cam, env)
     clip = None
     if clip_quantile is not None:
@@ -187,12 +196,12 @@ def make_scene(mi, split, index, folder, spp, sources):
         json.dump({"to_world": pose.tolist()}, f)
     with open(os.path.join(tmp, "probe.txt"), "w") as f:
         f.write("probe\n")
-    meta = {"name": name, "version": VERSION, "split": split, "index": index, "seed": seed, "family": family,
-            "orientation": probe_info["orientation"], "pose_kind": pose_kind, "tilt_deg": round(tilt, 2),
-            "lighting": light, "probe": probe_info, "light": light_info, "camera": cam_info,
-            "mask_pixels": int(mask.sum()), "noise": round(noise, 4), "exposure_clip": clip,
-            "renderer": "mitsuba %s path max_depth %d, box filter, env background" % (mi.variant(), MAX_DEPTH),
-            "mitsuba_spp": spp, "make_s": round(time.time() - t0, 2)}
+    meta = dict(head, version=VERSION, seed=seed)
+    meta.update({"orientation": probe_info["orientation"], "pose_kind": pose_kind, "tilt_deg": round(tilt, 2),
+                 "lighting": light, "probe": probe_info, "light": light_info, "camera": cam_info,
+                 "mask_pixels": int(mask.sum()), "noise": round(noise, 4), "exposure_clip": clip,
+                 "renderer": "mitsuba %s path max_depth %d, box filter, env background" % (mi.variant(), MAX_DEPTH),
+                 "mitsuba_spp": spp, "make_s": round(time.time() - t0, 2)})
     with open(os.path.join(tmp, "scene.json"), "w") as f:
         json.dump(meta, f, indent=1)
     shutil.rmtree(folder, ignore_errors=True)

@@ -365,7 +365,7 @@ fn synth_captures(args: &CaptureArgs) -> Result<()> {
         width: args.width,
         height: args.height,
     };
-    let capture = alp::synth::synthesize_capture(&probe, &env, &settings)?;
+    let capture = alp::synth::synthesize_capture(&probe, &env, &GgxMetal, &settings)?;
     alp::synth::write_capture(&args.out, &capture)
 }
 

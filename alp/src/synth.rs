@@ -11,7 +11,7 @@ use std::path::{Component, Path, PathBuf};
 use glam::{Quat, Vec3};
 
 use render::RenderError;
-use render::bsdf::GgxMetal;
+use render::bsdf::{Bsdf, GgxMetal};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
@@ -103,7 +103,7 @@ pub fn synthesize(probe: &ProbeAsset, env: &EnvMap, settings: &SynthSettings) ->
         settings.height,
         &mut Rng::new(settings.seed, stream::CAMERA),
     )?;
-    let (mut image, mask) = render_in_passes(probe, &pose, &camera, env, settings.spp, settings.seed);
+    let (mut image, mask) = render_in_passes(probe, &pose, &camera, env, &GgxMetal, settings.spp, settings.seed);
     apply_sensor(&mut image, settings.noise, settings.exposure_clip, settings.seed);
     Ok(SynthScene {
         image,
@@ -289,10 +289,15 @@ pub struct SynthCapture {
     pub probe: ProbeAsset,
 }
 
-/// Renders `probe` under `env` standing upright at the origin of the world, as a turntable in a
-/// light box is shot: `settings.views` cameras on rings at [`CAPTURE_ELEVATIONS_DEG`] looking at
-/// it, the mesh written in a random frame and scale.
-pub fn synthesize_capture(probe: &ProbeAsset, env: &EnvMap, settings: &CaptureSettings) -> Result<SynthCapture> {
+/// Renders `probe`, its metal `bsdf`'s, under `env` standing upright at the origin of the world,
+/// as a turntable in a light box is shot: `settings.views` cameras on rings at
+/// [`CAPTURE_ELEVATIONS_DEG`] looking at it, the mesh written in a random frame and scale.
+pub fn synthesize_capture(
+    probe: &ProbeAsset,
+    env: &EnvMap,
+    bsdf: &dyn Bsdf<f32>,
+    settings: &CaptureSettings,
+) -> Result<SynthCapture> {
     if settings.views < LEAST_VIEWS {
         return Err(Error::invalid(
             "--views",
@@ -347,7 +352,7 @@ pub fn synthesize_capture(probe: &ProbeAsset, env: &EnvMap, settings: &CaptureSe
         let wanted_px = CAPTURE_PROBE_HEIGHT * settings.height as f32;
         let camera = framed(&posed, size, CAPTURE_FOV_Y_DEG, towards_camera, centre, wanted_px)?;
         let seed = settings.seed.wrapping_add((k as u64 + 1) << 48);
-        let (mut image, mask) = render_in_passes(probe, &pose, &camera, env, settings.spp, seed);
+        let (mut image, mask) = render_in_passes(probe, &pose, &camera, env, bsdf, settings.spp, seed);
         apply_sensor(&mut image, settings.noise, None, seed);
         let name = format!("view_{k:03}");
         let photo = Photo::new(image, mask, camera).map_err(|e| Error::invalid(name.clone(), e.rule()))?;
@@ -387,6 +392,7 @@ fn render_in_passes(
     pose: &Pose,
     camera: &Camera,
     env: &EnvMap,
+    bsdf: &dyn Bsdf<f32>,
     spp: u32,
     seed: u64,
 ) -> (RgbImage, Mask) {
@@ -400,7 +406,7 @@ fn render_in_passes(
             spp: pass_spp,
             seed: seed.wrapping_add((pass as u64) << 32),
         };
-        let (image, mask) = render_image(probe, pose, camera, env, &GgxMetal, &settings);
+        let (image, mask) = render_image(probe, pose, camera, env, bsdf, &settings);
         for ((total, rgb), (vote, &inside)) in sum
             .iter_mut()
             .zip(&image.pixels)

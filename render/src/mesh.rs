@@ -177,6 +177,50 @@ impl Mesh {
         weld_by_position(&self.positions)
     }
 
+    /// The mesh with its vertices merged in a grid of cubes of side `cell`
+    /// (vertex clustering, Rossignac and Borrel 1993): each cube's vertices
+    /// become their mean, triangles whose corners fall in fewer than three
+    /// cubes are dropped and repeats kept once. A far cheaper outline of a
+    /// dense scan, within about a cell of it; each merged vertex keeps the
+    /// texture coordinates of its first vertex, its normals are recomputed.
+    pub fn clustered(&self, cell: f32) -> Mesh {
+        let cell = cell.max(f32::MIN_POSITIVE);
+        let (lo, _) = self.bounds();
+        let mut cluster_of: HashMap<[i32; 3], u32> = HashMap::new();
+        let mut sums: Vec<(Vec3, u32, Vec2)> = Vec::new();
+        let vertex: Vec<u32> = self
+            .positions
+            .iter()
+            .zip(&self.uvs)
+            .map(|(&p, &uv)| {
+                let key = ((p - lo) / cell).floor().as_ivec3().to_array();
+                let k = *cluster_of.entry(key).or_insert_with(|| {
+                    sums.push((Vec3::ZERO, 0, uv));
+                    sums.len() as u32 - 1
+                });
+                sums[k as usize].0 += p;
+                sums[k as usize].1 += 1;
+                k
+            })
+            .collect();
+        let positions: Vec<Vec3> = sums.iter().map(|(sum, n, _)| *sum / *n as f32).collect();
+        let mut seen = std::collections::HashSet::new();
+        let triangles: Vec<[u32; 3]> = self
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| vertex[i as usize]))
+            .filter(|&[a, b, c]| a != b && b != c && a != c)
+            .filter(|t| {
+                // The same three clusters in either winding are one triangle (or a sliver pair).
+                let mut key = *t;
+                key.sort_unstable();
+                seen.insert(key)
+            })
+            .collect();
+        let normals = smooth_vertex_normals(&positions, &triangles);
+        Mesh::new(positions, normals, sums.iter().map(|s| s.2).collect(), triangles)
+    }
+
     /// Signed volume enclosed (divergence theorem); positive for a closed mesh with outward winding.
     pub fn signed_volume(&self) -> f64 {
         (0..self.triangles.len())
@@ -299,6 +343,29 @@ mod tests {
         // Smooth normals at a corner point along the diagonal.
         let n = mesh.normals[0];
         assert!((n.abs() - Vec3::splat(1.0 / 3.0f32.sqrt())).length() < 1e-5);
+    }
+
+    #[test]
+    fn a_clustered_can_keeps_its_shape_with_a_fifth_of_its_triangles() {
+        // A dense scan's density: 512 segments round the axis.
+        let can = crate::procedural::surface_of_revolution(&crate::procedural::SodaCan::default().profile(), 512);
+        let (lo, hi) = can.bounds();
+        let cell = (hi - lo).max_element() / 40.0;
+        let coarse = can.clustered(cell);
+        assert!(
+            coarse.triangles.len() * 5 < can.triangles.len(),
+            "{} of {} triangles",
+            coarse.triangles.len(),
+            can.triangles.len()
+        );
+        // Every merged vertex lies within a cell of the original's box, the volume within 5 %.
+        let (clo, chi) = coarse.bounds();
+        assert!((clo - lo).abs().max_element() < cell && (chi - hi).abs().max_element() < cell);
+        let ratio = coarse.signed_volume() / can.signed_volume();
+        assert!((ratio - 1.0).abs() < 0.05, "volume ratio {ratio}");
+        // A cell far smaller than the triangles changes nothing but the welded seams.
+        let fine = can.clustered(cell * 1e-4);
+        assert_eq!(fine.triangles.len(), can.triangles.len());
     }
 
     #[test]

@@ -4,6 +4,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use render::RenderError;
+use render::bsdf::GgxMetal;
 use render::image_io::RgbImage;
 
 use super::capture::Capture;
@@ -114,11 +115,19 @@ pub fn run(args: &AcquireArgs) -> Result<()> {
     let verbose = std::io::stderr().is_terminal();
     let bar = progress_bar(verbose, "alp acquire {bar:30} {pos}/{len} {msg}, {elapsed}");
     let result = pool.install(|| {
-        acquire(&capture, &name, size, &settings, truth.as_ref(), &|phase, done, all| {
-            bar.set_length(all as u64);
-            bar.set_position(done as u64);
-            bar.set_message(phase.to_string());
-        })
+        acquire(
+            &capture,
+            &name,
+            size,
+            &GgxMetal,
+            &settings,
+            truth.as_ref(),
+            &|phase, done, all| {
+                bar.set_length(all as u64);
+                bar.set_position(done as u64);
+                bar.set_message(phase.to_string());
+            },
+        )
     });
     bar.finish_and_clear();
     let acquisition = result?;

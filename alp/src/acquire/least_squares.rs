@@ -21,6 +21,7 @@
 
 use std::time::Instant;
 
+use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
 use render::pose::Pose;
 use render::probe::Texture;
@@ -83,7 +84,7 @@ impl Default for LeastSquaresSettings {
         LeastSquaresSettings {
             levels: 4,
             iterations: 300,
-            spp: 32,
+            spp: 16,
             pixels_per_view: 16000,
             search_spp: 4,
             search_pixels_per_view: 4000,
@@ -114,6 +115,7 @@ pub fn solve(
     capture: &Capture,
     placements: &[Pose],
     size: [usize; 2],
+    bsdf: &dyn Bsdf<f32>,
     settings: &LeastSquaresSettings,
     progress: &dyn Fn(usize, usize),
 ) -> Result<(MaterialFit, usize)> {
@@ -145,7 +147,7 @@ pub fn solve(
         progress(done.get(), total)
     };
     let mut stages = Vec::new();
-    let placed: Vec<Placed> = placements.iter().map(|p| Placed::new(capture, p)).collect();
+    let placed: Vec<Placed> = placements.iter().map(|p| Placed::new(capture, p, bsdf)).collect();
     let mut fits = Vec::with_capacity(placed.len());
     for placed in &placed {
         let t0 = Instant::now();

@@ -21,7 +21,7 @@ use autodiff::{Tape, Var};
 use glam::{Vec2, Vec3};
 use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
-use render::bsdf::GgxMetal;
+use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
 use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
 use render::lookup::{ImageVars, TextureVars};
@@ -351,7 +351,7 @@ impl Problem<'_> {
             probe,
             posed,
             &self.placed.mesh.triangles,
-            &GgxMetal,
+            self.placed.bsdf,
             &LightSampling::mis(&self.placed.sampler).with_interreflection(),
         )
         .radiance(env)
@@ -459,12 +459,16 @@ pub fn solve(
     capture: &Capture,
     placements: &[Pose],
     size: [usize; 2],
+    bsdf: &dyn Bsdf<f32>,
     settings: &MaterialSettings,
     progress: &dyn Fn(usize, usize),
 ) -> Result<(MaterialFit, usize)> {
     let sizes = level_sizes(size, placements.len(), settings.levels)?;
     let layouts: Vec<Layout> = sizes.iter().map(|&[width, height]| Layout { width, height }).collect();
-    let problems: Vec<Problem> = placements.iter().map(|p| Problem::new(capture, p, settings)).collect();
+    let problems: Vec<Problem> = placements
+        .iter()
+        .map(|p| Problem::new(capture, p, bsdf, settings))
+        .collect();
     let total_steps = (layouts.len() + placements.len() - 1) * settings.steps;
     let initial = [
         RgbImage::filled(1, 1, [INITIAL_ALBEDO; 3]),
@@ -510,9 +514,9 @@ pub fn solve(
 }
 
 impl<'a> Problem<'a> {
-    fn new(capture: &'a Capture, to_world: &Pose, settings: &'a MaterialSettings) -> Self {
+    fn new(capture: &'a Capture, to_world: &Pose, bsdf: &'a dyn Bsdf<f32>, settings: &'a MaterialSettings) -> Self {
         Problem {
-            placed: Placed::new(capture, to_world),
+            placed: Placed::new(capture, to_world, bsdf),
             settings,
         }
     }

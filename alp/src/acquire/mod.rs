@@ -19,7 +19,7 @@ pub mod truth;
 
 use std::time::Instant;
 
-use render::bsdf::GgxMetal;
+use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
 use render::integrator::{RenderSettings, render_image};
 use render::probe::ProbeAsset;
@@ -56,7 +56,8 @@ pub struct AcquireSettings {
     pub material: MaterialSettings,
     /// The least-squares solve's settings.
     pub least_squares: LeastSquaresSettings,
-    /// Samples per pixel of the report's re-renders (PSNR, preview).
+    /// Samples per pixel of the report's re-renders (PSNR, preview): their
+    /// noise lowers the PSNR a little; each view's re-render costs its time.
     pub report_spp: u32,
 }
 
@@ -69,7 +70,7 @@ impl AcquireSettings {
             solver: Solver::Adam,
             material: MaterialSettings::default(),
             least_squares: LeastSquaresSettings::default(),
-            report_spp: 16,
+            report_spp: 4,
         };
         match quality {
             Quality::Default => default,
@@ -89,7 +90,7 @@ impl AcquireSettings {
                     roughness_rungs: 7,
                     ..default.least_squares
                 },
-                report_spp: 8,
+                report_spp: 2,
                 ..default
             },
             Quality::Best => AcquireSettings {
@@ -108,7 +109,7 @@ impl AcquireSettings {
                     roughness_rungs: 12,
                     ..default.least_squares
                 },
-                report_spp: 32,
+                report_spp: 16,
                 ..default
             },
         }
@@ -168,11 +169,14 @@ pub struct Acquisition {
 pub type Progress<'a> = dyn Fn(&str, usize, usize) + Sync + 'a;
 
 /// Acquires the probe `name` from `capture` at texture size `size` (width,
-/// height), judged against `truth` when given.
+/// height), its metal modelled by `bsdf` (the model the estimate will use
+/// with it: `GgxMetal`, the paper's, or a researcher's own), judged against
+/// `truth` when given.
 pub fn acquire(
     capture: &Capture,
     name: &str,
     size: [usize; 2],
+    bsdf: &dyn Bsdf<f32>,
     settings: &AcquireSettings,
     truth: Option<&truth::Truth>,
     progress: &Progress,
@@ -183,12 +187,14 @@ pub fn acquire(
     let placed = Instant::now();
     let poses: Vec<_> = placements.iter().map(|p| p.to_world).collect();
     let (fit, chosen): (MaterialFit, usize) = match settings.solver {
-        Solver::Adam => material::solve(capture, &poses, size, &settings.material, &|done, all| {
+        Solver::Adam => material::solve(capture, &poses, size, bsdf, &settings.material, &|done, all| {
             progress("textures", done, all)
         })?,
-        Solver::LeastSquares => least_squares::solve(capture, &poses, size, &settings.least_squares, &|done, all| {
-            progress("textures", done, all)
-        })?,
+        Solver::LeastSquares => {
+            least_squares::solve(capture, &poses, size, bsdf, &settings.least_squares, &|done, all| {
+                progress("textures", done, all)
+            })?
+        }
     };
     let placement = placements[chosen];
     let solved = Instant::now();
@@ -206,7 +212,7 @@ pub fn acquire(
             &placement.to_world,
             &view.photo.camera,
             &capture.lighting,
-            &GgxMetal,
+            bsdf,
             &render_settings,
         );
         views.push(ViewReport {

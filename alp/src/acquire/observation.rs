@@ -1,9 +1,12 @@
 //! The views' pixels as affine functions of the albedo at a fixed
 //! roughness: the texture solve's observations (PAPER.md, Sec. 3.2).
 //!
-//! The forward model (`render::integrator`: GGX metal, MIS, one bounce) is
-//! linear in the light and, through Schlick's Fresnel `F = A + (1 - A)(1 -
-//! cos)^5`, affine in the albedo `A` of the point a light sample leaves. So
+//! The forward model (`render::integrator`: the probe's BSDF, MIS, one
+//! bounce) is linear in the light and, for a metal whose albedo enters
+//! through Schlick's Fresnel `F = A + (1 - A)(1 - cos)^5` (GGX's, Beckmann's:
+//! any microfacet metal of `render::bsdf`'s kind), affine in the albedo `A`
+//! of the point a light sample leaves (a model that is not is taken along
+//! the line between albedo 0 and 1). So
 //! a hit's direct light is `offset + A(uv) * slope`, per channel, where the
 //! offset is its render with albedo 0 and the slope its render with albedo
 //! 1 less the offset, from the same samples. The bounce, whose light leaves
@@ -19,7 +22,7 @@
 //! variance (which depends on the material and so biases it).
 
 use glam::{Vec2, Vec3};
-use render::bsdf::GgxMetal;
+use render::bsdf::Bsdf;
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
@@ -32,6 +35,7 @@ use render::probe::Texture;
 use render::sampling::{EnvSampler, Rng, stratified_square};
 
 use autodiff::Tape;
+use rayon::prelude::*;
 
 use super::capture::Capture;
 
@@ -93,11 +97,13 @@ pub(crate) struct Placed<'a> {
     pub(crate) positions: Vec<Vec3>,
     pub(crate) env: &'a EnvMap,
     pub(crate) sampler: EnvSampler,
+    /// The probe's reflectance model: every re-render of a view uses it.
+    pub(crate) bsdf: &'a dyn Bsdf<f32>,
     pub(crate) views: Vec<FitView<'a>>,
 }
 
 impl<'a> Placed<'a> {
-    pub(crate) fn new(capture: &'a Capture, to_world: &Pose) -> Self {
+    pub(crate) fn new(capture: &'a Capture, to_world: &Pose, bsdf: &'a dyn Bsdf<f32>) -> Self {
         Placed {
             mesh: &capture.mesh,
             to_world: pack_pose(to_world),
@@ -109,6 +115,7 @@ impl<'a> Placed<'a> {
                 .collect(),
             env: &capture.lighting,
             sampler: EnvSampler::new(&capture.lighting),
+            bsdf,
             views: capture
                 .views
                 .iter()
@@ -187,8 +194,34 @@ const LIGHT_REDRAW_STREAM: u64 = 0x11D2_0000_0000;
 const PIXEL_SHARE_STREAM: u64 = 0x5A4E_0000_0000;
 
 /// Observes every view of `placed` with the roughness texture `roughness`,
-/// the bounce's second point at albedo `bounce_albedo`.
+/// the bounce's second point at albedo `bounce_albedo`: the views in
+/// parallel, each on its own tape, joined in the capture's order.
 pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32; 3], budget: &Budget) -> Observations {
+    let per_view: Vec<_> = placed
+        .views
+        .par_iter()
+        .map(|view| observe_view(placed, view, roughness, bounce_albedo, budget))
+        .collect();
+    let mut out = Observations::default();
+    out.hit_start.push(0);
+    for (pixels, pixel_hits) in per_view {
+        out.pixels.extend(pixels);
+        for hits in pixel_hits {
+            out.hits.extend(hits);
+            out.hit_start.push(out.hits.len());
+        }
+    }
+    out
+}
+
+/// One view's observed pixels and, per pixel, its hits (merged where close).
+fn observe_view(
+    placed: &Placed,
+    view: &FitView,
+    roughness: &Texture,
+    bounce_albedo: [f32; 3],
+    budget: &Budget,
+) -> (Vec<PixelObservation>, Vec<Vec<HitSlope>>) {
     let tape = Tape::<f32>::new();
     let constant = |v: f32| TextureVars::new(&tape, &Texture::constant([v; 3]), false);
     let zero = ProbeVars {
@@ -206,125 +239,111 @@ pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32;
     let mark = tape.mark();
     let views = placed.views.len().max(1);
     let mut out = Observations::default();
-    // Per observed pixel, its hits (merged where close).
     let mut pixel_hits: Vec<Vec<HitSlope>> = Vec::new();
-    for view in &placed.views {
-        let share = budget.pixels_per_view as f32 / view.target.len().max(1) as f32;
-        let kept = |p: u32| {
-            view.slot[p as usize].is_some()
-                && (share >= 1.0 || Rng::new(budget.seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
-        };
-        // Per image pixel, its index in this view's observations.
-        let mut row = vec![u32::MAX; view.slot.len()];
-        let first = out.pixels.len();
-        let passes = budget.spp.max(1).div_ceil(SPP_PER_PASS);
-        for pass in 0..passes {
-            let spp = SPP_PER_PASS.min(budget.spp.max(1) - pass * SPP_PER_PASS);
-            let seed = budget.seed.wrapping_add((pass as u64) << 32);
-            let mut hits = PrimaryHits::trace(
-                placed.mesh,
-                &placed.positions,
+    let share = budget.pixels_per_view as f32 / view.target.len().max(1) as f32;
+    let kept = |p: u32| {
+        view.slot[p as usize].is_some()
+            && (share >= 1.0 || Rng::new(budget.seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
+    };
+    // Per image pixel, its index in this view's observations.
+    let mut row = vec![u32::MAX; view.slot.len()];
+    let passes = budget.spp.max(1).div_ceil(SPP_PER_PASS);
+    for pass in 0..passes {
+        let spp = SPP_PER_PASS.min(budget.spp.max(1) - pass * SPP_PER_PASS);
+        let seed = budget.seed.wrapping_add((pass as u64) << 32);
+        let mut hits = PrimaryHits::trace(
+            placed.mesh,
+            &placed.positions,
+            view.camera,
+            &RenderSettings { spp, seed },
+        );
+        hits.retain_pixels(kept);
+        if hits.is_empty() {
+            continue;
+        }
+        for half in 0..2u8 {
+            if half == 1 {
+                redraw_light_samples(&mut hits, seed ^ SECOND_HALF);
+            }
+            tape.reset_to(mark);
+            let direct = LightSampling::mis(&placed.sampler);
+            let triangles = &placed.mesh.triangles;
+            let bsdf = placed.bsdf;
+            let dark = light_samples_with(&tape, &hits, view.camera, &zero, &posed, triangles, bsdf, &direct);
+            let bright = light_samples_with(
+                &tape,
+                &hits,
                 view.camera,
-                &RenderSettings { spp, seed },
+                &one,
+                &posed,
+                triangles,
+                bsdf,
+                &direct.with_interreflection(),
             );
-            hits.retain_pixels(kept);
-            if hits.is_empty() {
-                continue;
-            }
-            for half in 0..2u8 {
-                if half == 1 {
-                    redraw_light_samples(&mut hits, seed ^ SECOND_HALF);
+            let light = |samples: &LightSamples<'_, f32>| -> [Vec<f32>; 3] {
+                let l = env.env_radiance(samples.wi);
+                std::array::from_fn(|c| tape.to_vec(samples.throughput[c] * l[c]))
+            };
+            let n = hits.len();
+            let (dark_light, bright_light) = (light(&dark), light(&bright));
+            // Per pixel of the pass: the bounce's light at albedo 1 (both
+            // points), and its hits.
+            let segment = tape.to_vec(bright.segment);
+            let mut bounce = vec![[0.0f32; 3]; hits.pixels.len()];
+            for k in bright.direct..segment.len() {
+                for c in 0..3 {
+                    bounce[segment[k] as usize][c] += bright_light[c][k];
                 }
-                tape.reset_to(mark);
-                let direct = LightSampling::mis(&placed.sampler);
-                let triangles = &placed.mesh.triangles;
-                let dark = light_samples_with(&tape, &hits, view.camera, &zero, &posed, triangles, &GgxMetal, &direct);
-                let bright = light_samples_with(
-                    &tape,
-                    &hits,
-                    view.camera,
-                    &one,
-                    &posed,
-                    triangles,
-                    &GgxMetal,
-                    &direct.with_interreflection(),
+            }
+            let mut count = vec![0u32; hits.pixels.len()];
+            for &s in &hits.segment {
+                count[s as usize] += 1;
+            }
+            let pass_share = spp as f32 / budget.spp.max(1) as f32;
+            for &pixel in &hits.pixels {
+                if row[pixel as usize] == u32::MAX {
+                    row[pixel as usize] = out.pixels.len() as u32;
+                    let target = view.target[view.slot[pixel as usize].expect("kept pixels are fitted") as usize];
+                    out.pixels.push(PixelObservation {
+                        target,
+                        weight: 0.0,
+                        offset: [[0.0; 3]; 2],
+                    });
+                    pixel_hits.push(Vec::new());
+                }
+            }
+            for i in 0..n {
+                let j = hits.segment[i] as usize;
+                let r = row[hits.pixels[j] as usize];
+                let offset = &mut out.pixels[r as usize].offset[half as usize];
+                let mut slope = [0.0f32; 3];
+                for c in 0..3 {
+                    let dark_i = dark_light[c][i] + dark_light[c][i + n];
+                    let bright_i = bright_light[c][i] + bright_light[c][i + n];
+                    offset[c] += pass_share * dark_i;
+                    slope[c] = pass_share * (bright_i - dark_i + bounce_albedo[c] * bounce[j][c] / count[j] as f32);
+                }
+                merge(
+                    &mut pixel_hits[r as usize],
+                    HitSlope {
+                        uv: super::material::hit_uv(placed.mesh, &placed.positions, hits.triangle[i], hits.point[i]),
+                        slope,
+                        half,
+                    },
+                    budget.merge_uv,
                 );
-                let light = |samples: &LightSamples<'_, f32>| -> [Vec<f32>; 3] {
-                    let l = env.env_radiance(samples.wi);
-                    std::array::from_fn(|c| tape.to_vec(samples.throughput[c] * l[c]))
-                };
-                let n = hits.len();
-                let (dark_light, bright_light) = (light(&dark), light(&bright));
-                // Per pixel of the pass: the bounce's light at albedo 1 (both
-                // points), and its hits.
-                let segment = tape.to_vec(bright.segment);
-                let mut bounce = vec![[0.0f32; 3]; hits.pixels.len()];
-                for k in bright.direct..segment.len() {
-                    for c in 0..3 {
-                        bounce[segment[k] as usize][c] += bright_light[c][k];
-                    }
-                }
-                let mut count = vec![0u32; hits.pixels.len()];
-                for &s in &hits.segment {
-                    count[s as usize] += 1;
-                }
-                let pass_share = spp as f32 / budget.spp.max(1) as f32;
-                for &pixel in &hits.pixels {
-                    if row[pixel as usize] == u32::MAX {
-                        row[pixel as usize] = out.pixels.len() as u32;
-                        let target = view.target[view.slot[pixel as usize].expect("kept pixels are fitted") as usize];
-                        out.pixels.push(PixelObservation {
-                            target,
-                            weight: 0.0,
-                            offset: [[0.0; 3]; 2],
-                        });
-                        pixel_hits.push(Vec::new());
-                    }
-                }
-                for i in 0..n {
-                    let j = hits.segment[i] as usize;
-                    let r = row[hits.pixels[j] as usize];
-                    let offset = &mut out.pixels[r as usize].offset[half as usize];
-                    let mut slope = [0.0f32; 3];
-                    for c in 0..3 {
-                        let dark_i = dark_light[c][i] + dark_light[c][i + n];
-                        let bright_i = bright_light[c][i] + bright_light[c][i + n];
-                        offset[c] += pass_share * dark_i;
-                        slope[c] = pass_share * (bright_i - dark_i + bounce_albedo[c] * bounce[j][c] / count[j] as f32);
-                    }
-                    merge(
-                        &mut pixel_hits[r as usize],
-                        HitSlope {
-                            uv: super::material::hit_uv(
-                                placed.mesh,
-                                &placed.positions,
-                                hits.triangle[i],
-                                hits.point[i],
-                            ),
-                            slope,
-                            half,
-                        },
-                        budget.merge_uv,
-                    );
-                }
             }
         }
-        // Weights: relative squared error, the view's pixels summing to 1 /
-        // views (both halves read the same hits, so every pixel has both).
-        let pixels = out.pixels.len() - first;
-        let floor = budget.relative_floor * view.mean_luminance();
-        for p in &mut out.pixels[first..] {
-            let scale = (luminance(&p.target).max(0.0) as f64 + floor).max(f64::MIN_POSITIVE);
-            p.weight = 1.0 / (scale * scale * pixels as f64 * views as f64);
-        }
     }
-    out.hit_start = Vec::with_capacity(pixel_hits.len() + 1);
-    out.hit_start.push(0);
-    for hits in pixel_hits {
-        out.hits.extend(hits);
-        out.hit_start.push(out.hits.len());
+    // Weights: relative squared error, the view's pixels summing to 1 /
+    // views (both halves read the same hits, so every pixel has both).
+    let pixels = out.pixels.len();
+    let floor = budget.relative_floor * view.mean_luminance();
+    for p in &mut out.pixels {
+        let scale = (luminance(&p.target).max(0.0) as f64 + floor).max(f64::MIN_POSITIVE);
+        p.weight = 1.0 / (scale * scale * pixels as f64 * views as f64);
     }
-    out
+    (out.pixels, pixel_hits)
 }
 
 /// New random numbers, from `seed`, for the light samples of `hits` (the

@@ -34,6 +34,13 @@ pub struct PlacementSettings {
     /// Axis directions tried, spread evenly over the sphere: more find a
     /// scan in an odd frame more surely, at one short fit each.
     pub axes: usize,
+    /// Views the starts read (spread over the capture): a few views tell
+    /// the orientation apart; every view costs each start's every step.
+    pub start_views: usize,
+    /// The starts and the kept fits read the scan merged into this many
+    /// cells across its longest side (`Mesh::clustered`): the outline
+    /// within a cell at a fraction of the triangles; the polish reads it whole.
+    pub coarse_cells: usize,
     /// Adam iterations of each start's fit.
     pub start_iters: usize,
     /// Starts fitted on (the best by their short fit's loss).
@@ -43,7 +50,8 @@ pub struct PlacementSettings {
     /// The starts and the kept fits read the views shrunk by a whole
     /// factor to about this height: fewer pixels, about as sure an outline.
     pub coarse_height_px: u32,
-    /// Adam iterations of the kept fits' polish at the views' own size.
+    /// Adam iterations of the best kept fit's polish (and its twin's) at
+    /// the views' own size and the scan's own triangles.
     pub polish_iters: usize,
     /// The end-for-end twin of the best fit is a candidate when its
     /// silhouette loss is at most this many times the best's: higher
@@ -55,6 +63,8 @@ impl Default for PlacementSettings {
     fn default() -> Self {
         PlacementSettings {
             axes: 26,
+            start_views: 8,
+            coarse_cells: 32,
             start_iters: 40,
             kept: 3,
             final_iters: 150,
@@ -132,10 +142,14 @@ impl Silhouettes<'_> {
 /// description): the best fit, and its end-for-end twin when its outline
 /// fits nearly as well (best first).
 pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Placement>> {
-    let silhouettes = |reduced_px: Option<u32>| -> Result<Silhouettes> {
-        let views = capture
-            .views
-            .iter()
+    let (lo, hi) = capture.mesh.bounds();
+    let clustered = capture
+        .mesh
+        .clustered((hi - lo).max_element() / settings.coarse_cells.max(1) as f32);
+    let silhouettes = |mesh, reduced_px: Option<u32>, views: usize| -> Result<Silhouettes> {
+        let n = capture.views.len();
+        let views = (0..views.clamp(1, n))
+            .map(|k| &capture.views[k * n / views.clamp(1, n)])
             .map(|v| {
                 let (camera, mask) = match reduced_px {
                     Some(px) => reduced(&v.photo.camera, &v.photo.mask, px)?,
@@ -145,14 +159,19 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
             })
             .collect::<Result<_>>()?;
         Ok(Silhouettes {
-            mesh: &capture.mesh,
-            edges: EdgeAdjacency::new(&capture.mesh),
+            mesh,
+            edges: EdgeAdjacency::new(mesh),
             views,
         })
     };
-    let (coarse, full) = (silhouettes(Some(settings.coarse_height_px))?, silhouettes(None)?);
+    let all = capture.views.len();
+    let coarse_px = Some(settings.coarse_height_px);
+    let few = silhouettes(&clustered, coarse_px, settings.start_views)?;
+    let (coarse, full) = (
+        silhouettes(&clustered, coarse_px, all)?,
+        silhouettes(&capture.mesh, None, all)?,
+    );
     let centre = capture.centre()?;
-    let (lo, hi) = capture.mesh.bounds();
     let scan_centre = 0.5 * (lo + hi);
     let scale = world_radius(capture, centre) / outline_radius(&capture.mesh).max(f32::MIN_POSITIVE);
     let depth = capture
@@ -173,17 +192,14 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
         .collect();
     let mut fitted: Vec<(Pose, f64)> = starts
         .par_iter()
-        .map(|start| coarse.fit(start, settings.start_iters, depth, &outline))
+        .map(|start| few.fit(start, settings.start_iters, depth, &outline))
         .collect::<Result<_>>()?;
     fitted.retain(|(_, loss)| loss.is_finite());
     fitted.sort_by(|a, b| a.1.total_cmp(&b.1));
     fitted.truncate(settings.kept.max(1));
     let best = fitted
         .par_iter()
-        .map(|(pose, _)| {
-            let (pose, _) = coarse.fit(pose, settings.final_iters, depth, &outline)?;
-            full.fit(&pose, settings.polish_iters, depth, &outline)
-        })
+        .map(|(pose, _)| coarse.fit(pose, settings.final_iters, depth, &outline))
         .collect::<Result<Vec<_>>>()?
         .into_iter()
         .filter(|(_, loss)| loss.is_finite())
@@ -201,7 +217,11 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
             - best.0.scale * (best.0.rotation * Quat::from_axis_angle(across, std::f32::consts::PI) * scan_centre),
     );
     let (twin, _) = coarse.fit(&flipped, settings.final_iters, depth, &outline)?;
-    let twin = full.fit(&twin, settings.polish_iters, depth, &outline)?;
+    let (best, twin) = rayon::join(
+        || full.fit(&best.0, settings.polish_iters, depth, &outline),
+        || full.fit(&twin, settings.polish_iters, depth, &outline),
+    );
+    let (best, twin) = (best?, twin?);
     let mut placements = vec![Placement {
         to_world: best.0,
         loss: best.1,
