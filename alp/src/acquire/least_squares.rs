@@ -84,7 +84,7 @@ impl Default for LeastSquaresSettings {
         LeastSquaresSettings {
             levels: 4,
             iterations: 300,
-            spp: 16,
+            spp: 32,
             pixels_per_view: 16000,
             search_spp: 4,
             search_pixels_per_view: 4000,
