@@ -139,6 +139,31 @@ def acquire(args, capture, out):
     return am.read_json(os.path.join(out, "report.json")), am.read_json(times)
 
 
+def true_in_acquired_frame(true_map, acquired, coverage):
+    """The true texture resampled to the acquired one's size and turned as the acquisition turned
+    it: a turn about the axis of revolution, which no silhouette tells, is a shift of the
+    texture's columns (u runs round the axis), found as the coverage-weighted least-squares fit."""
+    h, w = acquired.shape[:2]
+    rows = ((np.arange(h) + 0.5) * true_map.shape[0] / h).astype(int)
+    cols = ((np.arange(w) + 0.5) * true_map.shape[1] / w).astype(int)
+    resampled = true_map[rows][:, cols]
+    cost = [float((coverage[..., :1] * (acquired - np.roll(resampled, k, axis=1)) ** 2).sum()) for k in range(w)]
+    return np.roll(resampled, int(np.argmin(cost)), axis=1)
+
+
+def swapped_asset(acquired, true_probe, which, out):
+    """The acquired probe with the true `which` texture (albedo or roughness) in its frame."""
+    if not os.path.isfile(os.path.join(out, "probe.json")):
+        shutil.rmtree(out, ignore_errors=True)
+        shutil.copytree(acquired, out + ".tmp", dirs_exist_ok=True)
+        mine = am.read_exr(os.path.join(acquired, which + ".exr"))
+        true = am.read_exr(os.path.join(true_probe, which + ".exr"))
+        coverage = am.read_exr(os.path.join(acquired, "coverage.exr"))
+        am.write_exr(os.path.join(out + ".tmp", which + ".exr"), true_in_acquired_frame(true, mine, coverage))
+        os.rename(out + ".tmp", out)
+    return out
+
+
 def mean_of(recs, sphere):
     ok = [r[sphere] for r in recs if not r.get("error")]
     return float(np.mean(ok)) if ok else float("nan")
@@ -156,19 +181,43 @@ def run_probe(args, mi, sources, split, index, cache):
     acquired = [estimate(args, s, os.path.join(runs, "acquired"), os.path.join(runs, os.path.basename(s)), cache)
                 for s in scenes]
     truth = report.get("truth") or {}
+    swaps = {}
+    for which in ("albedo", "roughness") if args.swaps else ():
+        asset = swapped_asset(os.path.join(runs, "acquired"), os.path.join(folder, "probe"), which,
+                              os.path.join(runs, "true_" + which))
+        recs = [estimate(args, s, asset, os.path.join(runs, "true_" + which, os.path.basename(s)), cache)
+                for s in scenes]
+        swaps["true_" + which] = {s: mean_of(recs, s) for s in SPHERES}
     return {"split": split, "probe": name, "family": info["family"], "label": info.get("label"),
             "metal": info.get("metal"), "capture_source": info["capture_source"], "views": args.views,
             "alp_sha256": args.alp_sha[:12], "estimate_sha256": args.estimate_sha[:12], "acquire_args": args.acquire_args,
             "true": {s: mean_of(true, s) for s in SPHERES}, "acquired": {s: mean_of(acquired, s) for s in SPHERES},
+            **swaps,
             "scenes": [{"scene": t["scene"], "true": {s: t.get(s) for s in SPHERES},
                         "acquired": {s: a.get(s) for s in SPHERES}, "error": t.get("error") or a.get("error")}
                        for t, a in zip(true, acquired)],
             **{k: truth.get(k) for k in ("axis_deg", "centre_pct", "scale_pct", "albedo_rmse", "roughness_rmse")},
+            # A probe alike at both ends (a ring) is as right end for end.
+            **({"axis_deg": min(truth["axis_deg"], 180.0 - truth["axis_deg"])}
+               if info["orientation"] == "line" and truth.get("axis_deg") is not None else {}),
             "seconds": report["seconds"], **times, "cpu_use": round(times["cpu_s"] / max(times["wall_s"], 1e-9), 2)}
 
 
 def fmt3(xs, nd=2):
     return " / ".join(es.fmt(x, nd) for x in xs)
+
+
+def swap_table(records, split):
+    """Per family, the acquired asset's error with its own textures and with each true one swapped in."""
+    keys = [k for k in ("acquired", "true_albedo", "true_roughness", "true") if all(k in r for r in records)]
+    lines = ["| %s | probes | %s |" % (split, " | ".join(k.replace("_", " ") for k in keys)),
+             "|---|---|" + "---|" * len(keys)]
+    for family in list(dict.fromkeys(ROTA)) + ["all"]:
+        recs = [r for r in records if family in ("all", r["family"])]
+        if recs:
+            lines.append("| %s | %d | %s |" % (family, len(recs), " | ".join(
+                fmt3([np.mean([r[k][s] for r in recs]) for s in SPHERES]) for k in keys)))
+    return "\n".join(lines)
 
 
 def table(records, split):
@@ -208,6 +257,9 @@ def main():
     ap.add_argument("--eval-spp", type=int, default=256, help="alp eval --spp")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--acquire-args", default="", help="more flags for alp acquire, e.g. \"--quality fast\"")
+    ap.add_argument("--swaps", action="store_true",
+                    help="also estimate with the acquired probe holding the true albedo, then the true roughness "
+                         "(each turned into the acquired frame): which texture costs most downstream")
     ap.add_argument("--envmaps", default=os.path.join(HERE, "..", "assets", "envmaps"))
     ap.add_argument("--variant", default="llvm_ad_rgb", choices=["scalar_rgb", "llvm_ad_rgb"])
     args = ap.parse_args()
@@ -235,9 +287,10 @@ def main():
     with open(os.path.join(args.out, args.label + ".jsonl"), "w") as f:
         f.writelines(json.dumps(r) + "\n" for r in records)
     cmdline = " ".join(["python3", "tools/capture_bench.py"] + sys.argv[1:])
-    md = "`%s`\n\n" % cmdline + "\n\n".join(
-        table([r for r in records if r["split"] == s], s) for s in args.splits.split(",")
-        if any(r["split"] == s for r in records))
+    splits = [s for s in args.splits.split(",") if any(r["split"] == s for r in records)]
+    md = "`%s`\n\n" % cmdline + "\n\n".join(table([r for r in records if r["split"] == s], s) for s in splits)
+    if args.swaps:
+        md += "\n\n" + "\n\n".join(swap_table([r for r in records if r["split"] == s], s) for s in splits)
     with open(os.path.join(args.out, args.label + ".md"), "w") as f:
         f.write(md + "\n")
     print(md)

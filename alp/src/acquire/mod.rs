@@ -19,14 +19,18 @@ pub mod truth;
 
 use std::time::Instant;
 
+use glam::{Quat, Vec3};
 use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
 use render::integrator::{RenderSettings, render_image};
+use render::mesh::Mesh;
+use render::pose::Pose;
 use render::probe::ProbeAsset;
 use serde::Serialize;
 
 use crate::error::Result;
-use crate::estimate::Quality;
+use crate::estimate::symmetry;
+use crate::estimate::{Quality, Settings};
 use capture::Capture;
 use least_squares::LeastSquaresSettings;
 use material::{LossTerms, MaterialFit, MaterialSettings, StageReport};
@@ -198,7 +202,8 @@ pub fn acquire(
     };
     let placement = placements[chosen];
     let solved = Instant::now();
-    let asset = fit.asset(name, &capture.mesh);
+    let (mesh, seen_at) = probe_frame(&capture.mesh, &placement.to_world);
+    let asset = fit.asset(name, &mesh);
     let render_settings = RenderSettings {
         spp: settings.report_spp,
         seed: REPORT_SEED,
@@ -209,7 +214,7 @@ pub fn acquire(
         progress("report", k, capture.views.len());
         let (image, _) = render_image(
             &asset,
-            &placement.to_world,
+            &seen_at,
             &view.photo.camera,
             &capture.lighting,
             bsdf,
@@ -248,6 +253,24 @@ pub fn acquire(
     })
 }
 
+/// The scan as a probe asset's mesh (FORMATS.md: metres, and the axis
+/// along +Y, as the estimate reads a probe): posed into the cameras' frame
+/// by its placement, turned so that its axis is +Y (`symmetry::axis_to_y`:
+/// already so for a probe that stood on a turntable), the middle of its
+/// base at the origin. A scan keeps its own frame and units otherwise (a
+/// capture's are any), and the estimate would start from a wrong size and
+/// lean it about a wrong axis. Returns the mesh and the pose that puts it
+/// where the views saw it.
+pub fn probe_frame(scan: &Mesh, to_world: &Pose) -> (Mesh, Pose) {
+    let world = scan.posed(to_world);
+    let turn = symmetry::axis_to_y(&world, &Settings::default().symmetry);
+    let turned = world.posed(&Pose::new(turn, 1.0, Vec3::ZERO));
+    let (lo, hi) = turned.bounds();
+    let base = Vec3::new(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z));
+    let mesh = turned.posed(&Pose::new(Quat::IDENTITY, 1.0, -base));
+    (mesh, Pose::new(turn.inverse(), 1.0, turn.inverse() * base))
+}
+
 /// The seed of the report's re-renders.
 const REPORT_SEED: u64 = 0x5EED;
 
@@ -270,4 +293,44 @@ pub fn psnr_db(photo: &RgbImage, rerender: &RgbImage, inside: &[bool]) -> f64 {
     peaks.sort_by(f64::total_cmp);
     let peak = peaks[(peaks.len() * 99 / 100).min(peaks.len() - 1)];
     10.0 * (peak * peak / (sq / n as f64)).log10()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A can scanned in a turned frame at 7 units per metre, placed back
+    /// standing: the asset's mesh is the can in metres, upright, its base
+    /// at the origin, and the pose returned puts it where the views saw it.
+    #[test]
+    fn the_acquired_mesh_is_the_probe_in_metres_standing_on_its_base() {
+        let can = render::procedural::SodaCan::default().build().mesh;
+        let scan_frame = Pose::new(
+            Quat::from_euler(glam::EulerRot::XYZ, 0.7, -1.1, 0.4),
+            7.0,
+            Vec3::new(3.0, -2.0, 5.0),
+        );
+        let scan = can.posed(&scan_frame);
+        // Standing at (0.2, 0.1, -0.3) in the cameras' frame.
+        let stands = Pose::new(Quat::IDENTITY, 1.0, Vec3::new(0.2, 0.1, -0.3));
+        let to_world = Pose::new(
+            scan_frame.rotation.inverse(),
+            1.0 / 7.0,
+            stands.translation - scan_frame.rotation.inverse() * scan_frame.translation / 7.0,
+        );
+        let (mesh, seen_at) = probe_frame(&scan, &to_world);
+        let (lo, hi) = mesh.bounds();
+        let (clo, chi) = can.bounds();
+        assert!(
+            ((hi - lo) - (chi - clo)).abs().max_element() < 1e-4,
+            "{:?} against {:?}",
+            hi - lo,
+            chi - clo
+        );
+        assert!(lo.y.abs() < 1e-5 && (lo.x + hi.x).abs() < 1e-4 && (lo.z + hi.z).abs() < 1e-4);
+        for (p, q) in mesh.positions.iter().zip(&scan.positions) {
+            let (a, b) = (seen_at.transform_point(*p), to_world.transform_point(*q));
+            assert!((a - b).length() < 1e-4, "{a} against {b}");
+        }
+    }
 }
