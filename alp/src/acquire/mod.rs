@@ -19,7 +19,7 @@ pub mod truth;
 
 use std::time::Instant;
 
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
 use render::integrator::{RenderSettings, render_image};
@@ -264,10 +264,10 @@ pub fn acquire(
 pub fn probe_frame(scan: &Mesh, to_world: &Pose) -> (Mesh, Pose) {
     let world = scan.posed(to_world);
     let turn = symmetry::axis_to_y(&world, &Settings::default().symmetry);
-    let turned = world.posed(&Pose::new(turn, 1.0, Vec3::ZERO));
-    let (lo, hi) = turned.bounds();
+    let mut mesh = world.posed(&Pose::new(turn, 1.0, Vec3::ZERO));
+    let (lo, hi) = mesh.bounds();
     let base = Vec3::new(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z));
-    let mesh = turned.posed(&Pose::new(Quat::IDENTITY, 1.0, -base));
+    mesh.positions.iter_mut().for_each(|p| *p -= base);
     (mesh, Pose::new(turn.inverse(), 1.0, turn.inverse() * base))
 }
 
@@ -298,6 +298,7 @@ pub fn psnr_db(photo: &RgbImage, rerender: &RgbImage, inside: &[bool]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Quat;
 
     /// A can scanned in a turned frame at 7 units per metre, placed back
     /// standing: the asset's mesh is the can in metres, upright, its base

@@ -147,9 +147,9 @@ pub fn place(capture: &Capture, settings: &PlacementSettings) -> Result<Vec<Plac
         .mesh
         .clustered((hi - lo).max_element() / settings.coarse_cells.max(1) as f32);
     let silhouettes = |mesh, reduced_px: Option<u32>, views: usize| -> Result<Silhouettes> {
-        let n = capture.views.len();
-        let views = (0..views.clamp(1, n))
-            .map(|k| &capture.views[k * n / views.clamp(1, n)])
+        let (n, count) = (capture.views.len(), views.clamp(1, capture.views.len()));
+        let views = (0..count)
+            .map(|k| &capture.views[k * n / count])
             .map(|v| {
                 let (camera, mask) = match reduced_px {
                     Some(px) => reduced(&v.photo.camera, &v.photo.mask, px)?,
