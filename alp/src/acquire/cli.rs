@@ -8,6 +8,7 @@ use render::bsdf::GgxMetal;
 use render::image_io::RgbImage;
 
 use super::capture::Capture;
+use super::registration::RegistrationSettings;
 use super::truth::Truth;
 use super::{AcquireSettings, Acquisition, Solver, acquire};
 use crate::error::{Error, Result};
@@ -36,6 +37,12 @@ pub struct AcquireArgs {
     /// (a roughness search and an exact albedo solve: faster, see docs/results.md 13).
     #[arg(long, default_value = "adam")]
     pub solver: String,
+    /// on: the pose refined against the views' pixels once the textures are
+    /// fitted, and the textures solved again at it (more than twice the
+    /// texture time; not yet better on the Mitsuba captures); off: the
+    /// silhouettes' pose.
+    #[arg(long, default_value = "off")]
+    pub registration: String,
     /// Weight of the albedo's smoothness prior (default: the preset's):
     /// higher fills unseen or noisy texels more smoothly and blurs printed detail.
     #[arg(long)]
@@ -92,6 +99,11 @@ pub fn run(args: &AcquireArgs) -> Result<()> {
     let size = parse_texture_size(&args.texture_size)?;
     let mut settings = AcquireSettings::preset(parse_quality(&args.quality)?);
     settings.solver = parse_solver(&args.solver)?;
+    match args.registration.as_str() {
+        "on" => settings.registration = Some(RegistrationSettings::preset(settings.quality)),
+        "off" => {}
+        other => return Err(Error::invalid("--registration", format!("`{other}` is not on or off"))),
+    }
     let (albedo, roughness) = match settings.solver {
         Solver::Adam => (
             &mut settings.material.albedo_smoothness,

@@ -235,86 +235,27 @@ struct Problem<'a> {
 impl Problem<'_> {
     /// The hits of view `v` in its fitted pixels, with sample seed `seed`.
     fn hits(&self, v: usize, seed: u64) -> PrimaryHits {
-        let view = &self.placed.views[v];
-        let settings = RenderSettings {
-            spp: self.settings.spp,
-            seed,
-        };
-        let mut hits = PrimaryHits::trace(self.placed.mesh, &self.placed.positions, view.camera, &settings);
-        hits.retain_pixels(|p| view.slot[p as usize].is_some());
-        hits
+        view_hits(&self.placed, &self.placed.positions, v, self.settings.spp, seed)
     }
 
     /// The data term of view `v` at textures `x` (texel values), recorded
-    /// on `tape` (cleared first), its gradient added into `g`: the relative
-    /// squared error, its gradient made unbiased under the renders' noise by
-    /// two independent renders `a` and `b` of the same pixels, the
-    /// gradient `(b - t) da + (a - t) db` (a single render's squared error
-    /// would also minimize its variance, and an L1 its noise's median: both
-    /// darken what a light seen by few samples brightens).
+    /// on `tape` (cleared first), its gradient added into `g` (see
+    /// [`paired_error`]).
     fn data_term(&self, tape: &Tape<f32>, layout: Layout, x: &[f32], v: usize, seed: u64, g: &mut [f64]) -> f64 {
-        let [a, b] = self.hit_pair(v, seed);
-        if a.is_empty() {
+        let s = self.settings;
+        let pair = hit_pair(&self.placed, &self.placed.positions, v, s.spp, s.pixels_per_view, seed);
+        if pair[0].is_empty() {
             return 0.0;
         }
         tape.clear();
         let params = tape.leaf(x);
-        let view = &self.placed.views[v];
-        let target: Vec<[f32; 3]> = a
-            .pixels
-            .iter()
-            .map(|&p| view.target[view.slot[p as usize].expect("kept pixels are fitted") as usize])
-            .collect();
-        let floor = (self.settings.relative_floor * view.mean_luminance()) as f32;
-        let weight: Vec<f32> = target
-            .iter()
-            .map(|t| (luminance(t).max(0.0) + floor).max(1e-12).powi(-2))
-            .collect();
-        let weight = tape.constant(&weight);
         let scene = self.scene(tape, layout, params);
-        let rgb_a = self.render(tape, &scene, v, &a);
-        let rgb_b = self.render(tape, &scene, v, &b);
-        let mut surrogate = tape.constant(&[0.0]);
-        let mut value = 0.0;
-        let pixels = 3.0 * target.len() as f32;
-        for c in 0..3 {
-            let t = tape.constant(&target.iter().map(|t| t[c]).collect::<Vec<f32>>());
-            let (da, db) = (rgb_a[c] - t, rgb_b[c] - t);
-            let cross = da * db.stop_gradient() + da.stop_gradient() * db;
-            surrogate = surrogate + (cross * weight).sum() * (1.0 / pixels);
-            // Its value, (a - t)(b - t), is the squared error's unbiased
-            // estimate: the noise's variance, which a's own square would
-            // add, depends on the textures and would favour the smoother.
-            value += tape.item((da * db * weight).sum()) / pixels;
-        }
+        let (surrogate, value) = paired_error(tape, &self.placed, &scene, v, &pair, s.relative_floor);
         tape.backward(surrogate);
         for (gi, d) in g.iter_mut().zip(tape.grad(params).iter()) {
             *gi += *d as f64;
         }
-        value as f64
-    }
-
-    /// Two independent sets of hits (seeds from `seed`) of view `v` over
-    /// the same fitted pixels: all of them, or when there are more than
-    /// `MaterialSettings::pixels_per_view`, a random share of that many
-    /// (drawn afresh with each seed, so the mean over them stays the
-    /// view's mean on average).
-    fn hit_pair(&self, v: usize, seed: u64) -> [PrimaryHits; 2] {
-        let [mut a, mut b] = [seed, seed ^ SECOND_RENDER].map(|s| self.hits(v, s));
-        let size = a.width * a.height;
-        let mut both = vec![0u8; size];
-        for (hits, bit) in [(&a, 1u8), (&b, 2u8)] {
-            for &p in &hits.pixels {
-                both[p as usize] |= bit;
-            }
-        }
-        let share = self.settings.pixels_per_view as f32 / self.placed.views[v].target.len().max(1) as f32;
-        let kept = |p: u32| {
-            both[p as usize] == 3 && (share >= 1.0 || Rng::new(seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
-        };
-        a.retain_pixels(kept);
-        b.retain_pixels(kept);
-        [a, b]
+        value
     }
 
     /// The probe with the textures `params`, posed, and the lighting, on
@@ -339,22 +280,6 @@ impl Problem<'_> {
             posed,
             env: ImageVars::env(tape, self.placed.env, false),
         }
-    }
-
-    /// View `v`'s re-render of `scene` in the pixels of `hits`.
-    fn render<'t>(&self, tape: &'t Tape<f32>, scene: &Scene<'t>, v: usize, hits: &PrimaryHits) -> [Var<'t, f32>; 3] {
-        let Scene { probe, posed, env } = scene;
-        light_samples_with(
-            tape,
-            hits,
-            self.placed.views[v].camera,
-            probe,
-            posed,
-            &self.placed.mesh.triangles,
-            self.placed.bsdf,
-            &LightSampling::mis(&self.placed.sampler).with_interreflection(),
-        )
-        .radiance(env)
     }
 
     /// The priors at textures `x`: the albedo's and the roughness's total
@@ -388,10 +313,118 @@ impl Problem<'_> {
 }
 
 /// A step's probe and lighting on its tape.
-struct Scene<'t> {
-    probe: ProbeVars<'t, f32>,
-    posed: PosedMesh<'t, f32>,
-    env: ImageVars<'t, f32>,
+pub(crate) struct Scene<'t> {
+    pub(crate) probe: ProbeVars<'t, f32>,
+    pub(crate) posed: PosedMesh<'t, f32>,
+    pub(crate) env: ImageVars<'t, f32>,
+}
+
+/// The hits of view `v` of `placed` in its fitted pixels, the scan's
+/// vertices at `positions`, `spp` samples a pixel seeded by `seed`.
+pub(crate) fn view_hits(placed: &Placed, positions: &[Vec3], v: usize, spp: u32, seed: u64) -> PrimaryHits {
+    let view = &placed.views[v];
+    let settings = RenderSettings { spp, seed };
+    let mut hits = PrimaryHits::trace(placed.mesh, positions, view.camera, &settings);
+    hits.retain_pixels(|p| view.slot[p as usize].is_some());
+    hits
+}
+
+/// Two independent sets of hits (seeds from `seed`) of view `v` over the
+/// same fitted pixels: all of them, or when there are more than
+/// `pixels_per_view`, a random share of that many (drawn afresh with each
+/// seed, so the mean over them stays the view's mean on average).
+pub(crate) fn hit_pair(
+    placed: &Placed,
+    positions: &[Vec3],
+    v: usize,
+    spp: u32,
+    pixels_per_view: usize,
+    seed: u64,
+) -> [PrimaryHits; 2] {
+    let [mut a, mut b] = [seed, seed ^ SECOND_RENDER].map(|s| view_hits(placed, positions, v, spp, s));
+    let size = a.width * a.height;
+    let mut both = vec![0u8; size];
+    for (hits, bit) in [(&a, 1u8), (&b, 2u8)] {
+        for &p in &hits.pixels {
+            both[p as usize] |= bit;
+        }
+    }
+    let share = pixels_per_view as f32 / placed.views[v].target.len().max(1) as f32;
+    let kept = |p: u32| {
+        both[p as usize] == 3 && (share >= 1.0 || Rng::new(seed, PIXEL_SHARE_STREAM + p as u64).next_f32() < share)
+    };
+    a.retain_pixels(kept);
+    b.retain_pixels(kept);
+    [a, b]
+}
+
+/// View `v`'s re-render of `scene` in the pixels of `hits`.
+pub(crate) fn render<'t>(
+    tape: &'t Tape<f32>,
+    placed: &Placed,
+    scene: &Scene<'t>,
+    v: usize,
+    hits: &PrimaryHits,
+) -> [Var<'t, f32>; 3] {
+    let Scene { probe, posed, env } = scene;
+    light_samples_with(
+        tape,
+        hits,
+        placed.views[v].camera,
+        probe,
+        posed,
+        &placed.mesh.triangles,
+        placed.bsdf,
+        &LightSampling::mis(&placed.sampler).with_interreflection(),
+    )
+    .radiance(env)
+}
+
+/// The data term of view `v`: the relative squared error of `scene`'s
+/// re-render, a pixel's error relative to its photo's luminance plus
+/// `relative_floor` times the view's mean. Returns the surrogate to
+/// differentiate and the term's value. The gradient is made unbiased
+/// under the renders' noise by the two independent renders `a` and `b` of
+/// `pair`: `(b - t) da + (a - t) db` (a single render's squared error
+/// would also minimize its variance, and an L1 its noise's median: both
+/// darken what a light seen by few samples brightens).
+pub(crate) fn paired_error<'t>(
+    tape: &'t Tape<f32>,
+    placed: &Placed,
+    scene: &Scene<'t>,
+    v: usize,
+    pair: &[PrimaryHits; 2],
+    relative_floor: f64,
+) -> (Var<'t, f32>, f64) {
+    let [a, b] = pair;
+    let view = &placed.views[v];
+    let target: Vec<[f32; 3]> = a
+        .pixels
+        .iter()
+        .map(|&p| view.target[view.slot[p as usize].expect("kept pixels are fitted") as usize])
+        .collect();
+    let floor = (relative_floor * view.mean_luminance()) as f32;
+    let weight: Vec<f32> = target
+        .iter()
+        .map(|t| (luminance(t).max(0.0) + floor).max(1e-12).powi(-2))
+        .collect();
+    let weight = tape.constant(&weight);
+    let rgb_a = render(tape, placed, scene, v, a);
+    let rgb_b = render(tape, placed, scene, v, b);
+    let mut surrogate = tape.constant(&[0.0]);
+    let mut value = 0.0;
+    let pixels = 3.0 * target.len() as f32;
+    for c in 0..3 {
+        let t = tape.constant(&target.iter().map(|t| t[c]).collect::<Vec<f32>>());
+        let (da, db) = (rgb_a[c] - t, rgb_b[c] - t);
+        let cross = da * db.stop_gradient() + da.stop_gradient() * db;
+        surrogate = surrogate + (cross * weight).sum() * (1.0 / pixels);
+        // Its value, (a - t)(b - t), is the squared error's unbiased
+        // estimate: the noise's variance, which a's own square would
+        // add, depends on the textures and would favour the smoother.
+        value += tape.item((da * db * weight).sum()) / pixels;
+    }
+    (surrogate, value as f64)
 }
 
 /// The neighbouring texels (right and below) of a level's textures, as

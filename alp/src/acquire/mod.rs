@@ -14,6 +14,7 @@ pub mod least_squares;
 pub mod material;
 mod observation;
 pub mod placement;
+pub mod registration;
 mod roughness;
 pub mod truth;
 
@@ -35,6 +36,7 @@ use capture::Capture;
 use least_squares::LeastSquaresSettings;
 use material::{LossTerms, MaterialFit, MaterialSettings, StageReport};
 use placement::PlacementSettings;
+use registration::{RegistrationReport, RegistrationSettings};
 
 /// How the textures are solved for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -60,6 +62,11 @@ pub struct AcquireSettings {
     pub material: MaterialSettings,
     /// The least-squares solve's settings.
     pub least_squares: LeastSquaresSettings,
+    /// The pose refined against the views' pixels, the textures solved
+    /// again at it ([`registration`]); none (every preset's) keeps the
+    /// silhouettes' pose: on the Mitsuba captures it has not yet bettered
+    /// the textures (docs/results.md 17).
+    pub registration: Option<RegistrationSettings>,
     /// Samples per pixel of the report's re-renders (PSNR, preview): their
     /// noise lowers the PSNR a little; each view's re-render costs its time.
     pub report_spp: u32,
@@ -74,6 +81,7 @@ impl AcquireSettings {
             solver: Solver::Adam,
             material: MaterialSettings::default(),
             least_squares: LeastSquaresSettings::default(),
+            registration: None,
             report_spp: 4,
         };
         match quality {
@@ -134,6 +142,8 @@ pub struct ViewReport {
 pub struct PhaseSeconds {
     pub placement: f64,
     pub textures: f64,
+    /// The registration and the textures' second solve.
+    pub registration: f64,
     pub report: f64,
     pub total: f64,
 }
@@ -149,6 +159,7 @@ pub struct AcquireReport {
     pub to_world: [[f32; 4]; 4],
     /// The placement's silhouette loss (soft-mask L1 plus Chamfer, view mean).
     pub placement_loss: f64,
+    pub registration: Option<RegistrationReport>,
     /// The texture solve's terms at its end.
     pub loss: LossTerms,
     pub stages: Vec<StageReport>,
@@ -190,18 +201,31 @@ pub fn acquire(
     let placements = placement::place(capture, &settings.placement)?;
     let placed = Instant::now();
     let poses: Vec<_> = placements.iter().map(|p| p.to_world).collect();
-    let (fit, chosen): (MaterialFit, usize) = match settings.solver {
-        Solver::Adam => material::solve(capture, &poses, size, bsdf, &settings.material, &|done, all| {
-            progress("textures", done, all)
-        })?,
-        Solver::LeastSquares => {
-            least_squares::solve(capture, &poses, size, bsdf, &settings.least_squares, &|done, all| {
-                progress("textures", done, all)
-            })?
+    let textures = |poses: &[Pose], phase: &str| -> Result<(MaterialFit, usize)> {
+        let progress = |done, all| progress(phase, done, all);
+        match settings.solver {
+            Solver::Adam => material::solve(capture, poses, size, bsdf, &settings.material, &progress),
+            Solver::LeastSquares => {
+                least_squares::solve(capture, poses, size, bsdf, &settings.least_squares, &progress)
+            }
         }
     };
-    let placement = placements[chosen];
+    let (mut fit, chosen) = textures(&poses, "textures")?;
+    let mut placement = placements[chosen];
     let solved = Instant::now();
+    let registration = match &settings.registration {
+        Some(r) => {
+            let placed = observation::Placed::new(capture, &placement.to_world, bsdf);
+            let (pose, report) = registration::register(&placed, &fit.asset(name, &capture.mesh), r, &|done, all| {
+                progress("registration", done, all)
+            })?;
+            placement.to_world = pose;
+            fit = textures(&[pose], "textures at the registered pose")?.0;
+            Some(report)
+        }
+        None => None,
+    };
+    let registered = Instant::now();
     let (mesh, seen_at) = probe_frame(&capture.mesh, &placement.to_world);
     let asset = fit.asset(name, &mesh);
     let render_settings = RenderSettings {
@@ -233,6 +257,7 @@ pub fn acquire(
         texture_size: size,
         to_world: placement.to_world.to_world().transpose().to_cols_array_2d(),
         placement_loss: placement.loss,
+        registration,
         loss: fit.terms.clone(),
         stages: fit.stages.clone(),
         views,
@@ -240,7 +265,8 @@ pub fn acquire(
         seconds: PhaseSeconds {
             placement: (placed - t0).as_secs_f64(),
             textures: (solved - placed).as_secs_f64(),
-            report: solved.elapsed().as_secs_f64(),
+            registration: (registered - solved).as_secs_f64(),
+            report: registered.elapsed().as_secs_f64(),
             total: t0.elapsed().as_secs_f64(),
         },
         truth,

@@ -50,7 +50,7 @@ pub(crate) struct FitView<'a> {
 
 impl<'a> FitView<'a> {
     pub(crate) fn new(camera: &'a Camera, image: &RgbImage, mask: &Mask) -> Self {
-        let inner = eroded(mask);
+        let inner = eroded(&mask.inside, mask.width);
         let mut slot = vec![None; inner.len()];
         let mut target = Vec::new();
         for (p, _) in inner.iter().enumerate().filter(|(_, inside)| **inside) {
@@ -66,21 +66,22 @@ impl<'a> FitView<'a> {
     }
 }
 
-/// The mask less its edge pixels (a pixel stays when its 4 neighbours are inside too).
-fn eroded(mask: &Mask) -> Vec<bool> {
-    let (w, h) = (mask.width, mask.height);
+/// The pixels `inside` (row-major, `width` wide) less their edge: a
+/// pixel stays when its 4 neighbours are inside too.
+pub(crate) fn eroded(inside: &[bool], width: usize) -> Vec<bool> {
+    let (w, h) = (width, inside.len() / width.max(1));
     (0..w * h)
         .map(|p| {
             let (x, y) = (p % w, p / w);
-            mask.inside[p]
+            inside[p]
                 && x > 0
                 && y > 0
                 && x + 1 < w
                 && y + 1 < h
-                && mask.inside[p - 1]
-                && mask.inside[p + 1]
-                && mask.inside[p - w]
-                && mask.inside[p + w]
+                && inside[p - 1]
+                && inside[p + 1]
+                && inside[p - w]
+                && inside[p + w]
         })
         .collect()
 }
