@@ -123,10 +123,10 @@ struct PoseSpace {
     start: Pose,
     /// The scan's centre (its own frame): the turn is about it.
     centre: Vec3,
-    /// Radians, metres and log scale a unit.
+    /// Radians (and log scale) a unit: a pixel at the scan's radius.
     turn: f32,
+    /// Metres a unit.
     shift: f32,
-    grow: f32,
 }
 
 impl PoseSpace {
@@ -149,14 +149,13 @@ impl PoseSpace {
             centre,
             turn: pixel / radius.max(f32::MIN_POSITIVE),
             shift: pixel,
-            grow: pixel / radius.max(f32::MIN_POSITIVE),
         }
     }
 
     fn pose(&self, y: &[f64; UNKNOWNS]) -> Pose {
         let turn = Quat::from_scaled_axis(Vec3::new(y[0] as f32, y[1] as f32, y[2] as f32) * self.turn);
         let rotation = (turn * self.start.rotation).normalize();
-        let scale = self.start.scale * (y[6] as f32 * self.grow).exp();
+        let scale = self.start.scale * (y[6] as f32 * self.turn).exp();
         let centre =
             self.start.transform_point(self.centre) + Vec3::new(y[3] as f32, y[4] as f32, y[5] as f32) * self.shift;
         Pose::new(rotation, scale, centre - scale * (rotation * self.centre))
@@ -314,15 +313,14 @@ fn residuals(
                 .map(|&v| {
                     let seed = REGISTRATION_SEED + v as u64;
                     let mut pair = hit_pair(placed, &positions, v, settings.spp, settings.pixels_per_view, seed);
-                    let whole = |hits: &PrimaryHits| {
-                        let mut whole = vec![false; hits.width * hits.height];
-                        for (s, &p) in hits.pixels.iter().enumerate() {
-                            whole[p as usize] = hits.coverage[s] >= 1.0;
-                        }
-                        whole
+                    // The pixels every sample of which hits the scan (ascending).
+                    let whole = |hits: &PrimaryHits| -> Vec<u32> {
+                        let covered = hits.pixels.iter().zip(&hits.coverage);
+                        covered.filter(|(_, c)| **c >= 1.0).map(|(p, _)| *p).collect()
                     };
                     let (wa, wb) = (whole(&pair[0]), whole(&pair[1]));
-                    let kept = |p: u32| inner[v][p as usize] && wa[p as usize] && wb[p as usize];
+                    let kept =
+                        |p: u32| inner[v][p as usize] && wa.binary_search(&p).is_ok() && wb.binary_search(&p).is_ok();
                     pair.iter_mut().for_each(|hits| hits.retain_pixels(kept));
                     if pair[0].is_empty() {
                         return Vec::new();
