@@ -127,6 +127,8 @@ struct PoseSpace {
     turn: f32,
     /// Metres a unit.
     shift: f32,
+    /// The scan's bounding radius at `start`, metres.
+    radius: f32,
 }
 
 impl PoseSpace {
@@ -149,6 +151,7 @@ impl PoseSpace {
             centre,
             turn: pixel / radius.max(f32::MIN_POSITIVE),
             shift: pixel,
+            radius,
         }
     }
 
@@ -202,7 +205,7 @@ pub(crate) fn register(
     while iterations < settings.iterations {
         iterations += 1;
         progress(iterations, settings.iterations);
-        // The Jacobian's columns, by forward differences, as the normal equations.
+        // The Jacobian's columns, by central differences, as the normal equations.
         let columns: Vec<Vec<f32>> = (0..UNKNOWNS)
             .map(|k| {
                 let [mut ahead, mut behind] = [y; 2];
@@ -263,11 +266,7 @@ pub(crate) fn register(
     }
     let pose = space.pose(&y);
     let start = space.start;
-    let radius =
-        0.5 * {
-            let (lo, hi) = placed.mesh.bounds();
-            (hi - lo).length()
-        } * start.scale;
+    let radius = space.radius;
     let report = RegistrationReport {
         data_first,
         data_last: data,
