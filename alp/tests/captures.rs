@@ -375,6 +375,10 @@ fn bad_acquire_inputs_are_clear_errors_and_keep_the_output() {
             vec!["--captures", missing_s, "--out", out_s, "--solver", "newton"],
             "--solver",
         ),
+        (
+            vec!["--captures", missing_s, "--out", out_s, "--registration", "maybe"],
+            "--registration",
+        ),
     ] {
         let run = alp(&[&["acquire"], args.as_slice()].concat());
         let stderr = String::from_utf8_lossy(&run.stderr);
