@@ -157,7 +157,8 @@ pub struct AcquireReport {
     /// The scan's mesh-to-world pose found (the cameras' frame), rows of
     /// the 4x4 matrix as in `pose.json`.
     pub to_world: [[f32; 4]; 4],
-    /// The placement's silhouette loss (soft-mask L1 plus Chamfer, view mean).
+    /// The placement's silhouette loss (soft-mask L1 plus Chamfer, view
+    /// mean) at the silhouettes' pose (before any registration).
     pub placement_loss: f64,
     pub registration: Option<RegistrationReport>,
     /// The texture solve's terms at its end.

@@ -199,7 +199,8 @@ pub(crate) fn register(
             "no view has pixels far enough inside its mask to register the scan",
         ));
     }
-    let data_first = cross(&flatten(&base), &flatten(&base));
+    let mut flat = flatten(&base);
+    let data_first = cross(&flat, &flat);
     let (mut base, mut data, mut damping, mut iterations) = (base, data_first, 0.1, 0);
     let h = settings.difference_px;
     while iterations < settings.iterations {
@@ -214,7 +215,6 @@ pub(crate) fn register(
                 difference(&base, &at(&ahead), &at(&behind), 2.0 * h as f32)
             })
             .collect();
-        let flat = flatten(&base);
         let mut normal = [[0.0f64; UNKNOWNS]; UNKNOWNS];
         let mut gradient = [0.0f64; UNKNOWNS];
         for i in 0..UNKNOWNS {
@@ -247,19 +247,19 @@ pub(crate) fn register(
             let length = length.min(settings.max_step_px);
             let trial: [f64; UNKNOWNS] = std::array::from_fn(|k| y[k] + step[k]);
             let residual = at(&trial);
-            let flat = flatten(&residual);
-            let value = cross(&flat, &flat);
+            let trial_flat = flatten(&residual);
+            let value = cross(&trial_flat, &trial_flat);
             if value < data {
                 damping = (damping / 3.0).max(1e-6);
-                stepped = Some((trial, residual, value, length));
+                stepped = Some((trial, residual, trial_flat, value, length));
                 break;
             }
             damping *= 4.0;
         }
-        let Some((trial, residual, value, length)) = stepped else {
+        let Some((trial, residual, trial_flat, value, length)) = stepped else {
             break;
         };
-        (y, base, data) = (trial, residual, value);
+        (y, base, flat, data) = (trial, residual, trial_flat, value);
         if length < settings.converged_px {
             break;
         }
