@@ -23,7 +23,7 @@ use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
 use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
-use render::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use render::integrator::{LightSampling, PROBE_BOUNCES, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
 use render::lookup::{ImageVars, TextureVars};
 use render::mesh::Mesh;
 use render::pose::Pose;
@@ -375,7 +375,7 @@ pub(crate) fn render<'t>(
         posed,
         &placed.mesh.triangles,
         placed.bsdf,
-        &LightSampling::mis(&placed.sampler).with_interreflection(),
+        &LightSampling::mis(&placed.sampler).with_bounces(PROBE_BOUNCES),
     )
     .radiance(env)
 }

@@ -1,18 +1,18 @@
 //! The views' pixels as affine functions of the albedo at a fixed
 //! roughness: the texture solve's observations (PAPER.md, Sec. 3.2).
 //!
-//! The forward model (`render::integrator`: the probe's BSDF, MIS, one
-//! bounce) is linear in the light and, for a metal whose albedo enters
+//! The forward model (`render::integrator`: the probe's BSDF, MIS, its
+//! bounces) is linear in the light and, for a metal whose albedo enters
 //! through Schlick's Fresnel `F = A + (1 - A)(1 - cos)^5` (GGX's, Beckmann's:
 //! any microfacet metal of `render::bsdf`'s kind), affine in the albedo `A`
 //! of the point a light sample leaves (a model that is not is taken along
 //! the line between albedo 0 and 1). So
 //! a hit's direct light is `offset + A(uv) * slope`, per channel, where the
 //! offset is its render with albedo 0 and the slope its render with albedo
-//! 1 less the offset, from the same samples. The bounce, whose light leaves
-//! two points, is linearised in the first one's albedo with the second's
-//! held at a given value (its render at albedo 1 times that value), and
-//! spread over the pixel's hits. A pixel, the
+//! 1 less the offset, from the same samples. A bounce, whose light leaves
+//! two or more points, is linearised in the first one's albedo with the
+//! others' held at a given value (its render at albedo 1 times that value
+//! once per later point), and spread over the pixel's hits. A pixel, the
 //! mean of its hits, is then linear in the albedo texels its hits' bilinear
 //! taps read.
 //!
@@ -26,7 +26,9 @@ use render::bsdf::Bsdf;
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
-use render::integrator::{LightSamples, LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use render::integrator::{
+    LightSamples, LightSampling, PROBE_BOUNCES, PrimaryHits, ProbeVars, RenderSettings, light_samples_with,
+};
 use render::lookup::{ImageVars, TextureVars};
 use render::mesh::Mesh;
 use render::pose::Pose;
@@ -195,7 +197,7 @@ const LIGHT_REDRAW_STREAM: u64 = 0x11D2_0000_0000;
 const PIXEL_SHARE_STREAM: u64 = 0x5A4E_0000_0000;
 
 /// Observes every view of `placed` with the roughness texture `roughness`,
-/// the bounce's second point at albedo `bounce_albedo`: the views in
+/// the bounces' later points at albedo `bounce_albedo`: the views in
 /// parallel, each on its own tape, joined in the capture's order.
 pub(crate) fn observe(placed: &Placed, roughness: &Texture, bounce_albedo: [f32; 3], budget: &Budget) -> Observations {
     let per_view: Vec<_> = placed
@@ -279,7 +281,7 @@ fn observe_view(
                 &posed,
                 triangles,
                 bsdf,
-                &direct.with_interreflection(),
+                &direct.with_bounces(PROBE_BOUNCES),
             );
             let light = |samples: &LightSamples<'_, f32>| -> [Vec<f32>; 3] {
                 let l = env.env_radiance(samples.wi);
@@ -287,13 +289,18 @@ fn observe_view(
             };
             let n = hits.len();
             let (dark_light, bright_light) = (light(&dark), light(&bright));
-            // Per pixel of the pass: the bounce's light at albedo 1 (both
-            // points), and its hits.
+            // Per pixel of the pass: the bounces' light with albedo 1 at
+            // the first point and `bounce_albedo` at the later ones.
             let segment = tape.to_vec(bright.segment);
             let mut bounce = vec![[0.0f32; 3]; hits.pixels.len()];
-            for k in bright.direct..segment.len() {
-                for c in 0..3 {
-                    bounce[segment[k] as usize][c] += bright_light[c][k];
+            let mut later = [1.0f32; 3];
+            for (level, &start) in bright.bounce_starts.iter().enumerate() {
+                let end = bright.bounce_starts.get(level + 1).copied().unwrap_or(segment.len());
+                later = std::array::from_fn(|c| later[c] * bounce_albedo[c]);
+                for k in start..end {
+                    for c in 0..3 {
+                        bounce[segment[k] as usize][c] += later[c] * bright_light[c][k];
+                    }
                 }
             }
             let mut count = vec![0u32; hits.pixels.len()];
@@ -322,7 +329,7 @@ fn observe_view(
                     let dark_i = dark_light[c][i] + dark_light[c][i + n];
                     let bright_i = bright_light[c][i] + bright_light[c][i + n];
                     offset[c] += pass_share * dark_i;
-                    slope[c] = pass_share * (bright_i - dark_i + bounce_albedo[c] * bounce[j][c] / count[j] as f32);
+                    slope[c] = pass_share * (bright_i - dark_i + bounce[j][c] / count[j] as f32);
                 }
                 merge(
                     &mut pixel_hits[r as usize],

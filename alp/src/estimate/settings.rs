@@ -567,7 +567,7 @@ impl LightModel {
         };
         match (self.shadows, self.interreflection) {
             (false, _) => sampling.without_shadows(),
-            (true, true) => sampling.with_interreflection(),
+            (true, true) => sampling.with_bounces(1),
             (true, false) => sampling,
         }
     }
@@ -688,20 +688,20 @@ mod tests {
         let full = Settings::default().lighting.model;
         let s = full.sampling(Some(&sampler));
         assert!(
-            s.env.is_some() && s.shadows && s.interreflection,
+            s.env.is_some() && s.shadows && s.bounces == 1,
             "the default models it all"
         );
         assert!(full.sampling(None).env.is_none(), "no guide, no MIS");
         let s = LightModel { mis: false, ..full }.sampling(Some(&sampler));
-        assert!(s.env.is_none() && s.interreflection);
+        assert!(s.env.is_none() && s.bounces == 1);
         let s = LightModel {
             interreflection: false,
             ..full
         }
         .sampling(Some(&sampler));
-        assert!(s.env.is_some() && s.shadows && !s.interreflection);
+        assert!(s.env.is_some() && s.shadows && s.bounces == 0);
         let s = LightModel { shadows: false, ..full }.sampling(None);
-        assert!(!s.shadows && !s.interreflection, "nothing shadowed, nothing bounces");
+        assert!(!s.shadows && s.bounces == 0, "nothing shadowed, nothing bounces");
     }
 
     #[test]
