@@ -23,6 +23,7 @@
 //! of `silhouette` carry them; nor are shadow edges moving with the pose (V
 //! is a constant of each sample).
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use autodiff::{Real, Tape, Var, Vec3 as Vec3Var};
@@ -147,7 +148,7 @@ impl Occluder {
 /// acquisition's texture solves). A can's lid sees its rim's inside, which
 /// sees the lid: with one bounce the top of a can seen from above renders
 /// 16 % darker than a path tracer's (depth 4), with two 7 %; a third adds
-/// under 0.1 %. A bounce costs its shadowed samples only.
+/// about 0.1 %. A bounce costs its shadowed samples only.
 pub const PROBE_BOUNCES: u32 = 2;
 
 /// Start of the random number streams of the BRDF samples (plus the pixel
@@ -623,7 +624,7 @@ pub struct LightSamples<'t, T: Real> {
     pub pixels: usize,
     /// The first `direct` samples light the probe's visible points
     /// directly (the BRDF samples, one per hit, in the hits' order; then
-    /// the env-map samples, with MIS); the rest after one bounce off the
+    /// the env-map samples, with MIS); the rest after bounces off the
     /// probe ([`LightSampling::bounces`]).
     pub direct: usize,
     /// Where each bounce's samples start: bounce `k`'s (from 1) run from
@@ -641,6 +642,12 @@ impl<'t, T: Real> LightSamples<'t, T> {
     pub fn radiance(&self, env: &ImageVars<'t, T>) -> [Var<'t, T>; 3] {
         let l = env.env_radiance(self.wi);
         std::array::from_fn(|c| (self.throughput[c] * l[c]).segmented_sum(self.segment, self.pixels))
+    }
+
+    /// The samples of each bounce (from the first), as ranges of indices.
+    pub fn bounce_ranges(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        let ends = self.bounce_starts.iter().skip(1).copied().chain([self.lit.len()]);
+        self.bounce_starts.iter().zip(ends).map(|(&start, end)| start..end)
     }
 
     /// These samples, then `more` (of the same pixels), as one set; `direct` is the caller's.
@@ -709,7 +716,7 @@ impl<'a> LightSampling<'a> {
         LightSampling { bounces, ..self }
     }
 
-    /// The same without the probe's shadows on itself (nor its bounce).
+    /// The same without the probe's shadows on itself (nor its bounces).
     pub fn without_shadows(self) -> Self {
         LightSampling {
             shadows: false,
@@ -814,19 +821,19 @@ pub fn light_samples_with<'t, T: Real>(
         weight,
         lit,
         segment: s.segment,
-        points: hits.point.clone(),
+        points: Cow::Borrowed(&hits.point),
         samples: (0..hits.len()).collect(),
     };
+    let scene = BounceScene {
+        hits,
+        occluder,
+        probe,
+        posed,
+        triangles,
+        bsdf,
+        sampler: sampling.env,
+    };
     for level in 1..=sampling.bounces {
-        let scene = BounceScene {
-            hits,
-            occluder,
-            probe,
-            posed,
-            triangles,
-            bsdf,
-            sampler: sampling.env,
-        };
         let Some((bounced, next)) = bounce(tape, &scene, &from, level) else {
             break;
         };
@@ -925,7 +932,7 @@ fn per_pixel_draws<D: Send>(
 
 /// BRDF samples at a set of shading points (the hits', or a bounce's),
 /// what the next bounce goes on from.
-struct Bounce<'t, T: Real> {
+struct Bounce<'a, 't, T: Real> {
     hit: SurfaceHit<'t, T>,
     wi: Vec3Var<'t, T>,
     /// Throughput up to and including this sample, before its shadow test
@@ -935,7 +942,7 @@ struct Bounce<'t, T: Real> {
     /// The points' positions in `hits.pixels`.
     segment: Var<'t, T>,
     /// The shading points' positions (values).
-    points: Vec<Vec3>,
+    points: Cow<'a, [Vec3]>,
     /// Each point's hit sample (its index in `hits`), in order.
     samples: Vec<usize>,
 }
@@ -964,9 +971,9 @@ struct BounceScene<'a, 't, T: Real> {
 fn bounce<'t, T: Real>(
     tape: &'t Tape<T>,
     scene: &BounceScene<'_, 't, T>,
-    from: &Bounce<'t, T>,
+    from: &Bounce<'_, 't, T>,
     level: u32,
-) -> Option<(LightSamples<'t, T>, Bounce<'t, T>)> {
+) -> Option<(LightSamples<'t, T>, Bounce<'static, 't, T>)> {
     let lit = tape.to_vec(from.lit);
     let d = values(from.wi);
     let (occluder, points) = (scene.occluder, &from.points);
@@ -1021,7 +1028,7 @@ fn bounce<'t, T: Real>(
         weight: bsdf_weight,
         lit,
         segment,
-        points,
+        points: Cow::Owned(points),
         samples,
     };
     Some((light, next))

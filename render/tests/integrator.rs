@@ -503,11 +503,11 @@ fn grad_cases<'a>(
 ) -> [(&'a GradScene, LightSampling<'a>); 3] {
     let bouncing = LightSampling::BSDF.with_bounces(2);
     let tape = Tape::<f64>::new();
-    let once = light_samples_of(&tape, top, &LightSampling::BSDF.with_bounces(1))
-        .lit
-        .len();
     let samples = light_samples_of(&tape, top, &bouncing);
-    let (first, second) = (once - samples.direct, samples.lit.len() - once);
+    let counts: Vec<usize> = samples.bounce_ranges().map(|r| r.len()).collect();
+    let [first, second] = counts[..] else {
+        panic!("the lid view must bounce twice: bounces of {counts:?} samples")
+    };
     // A second bounce is rarer (a lobe of roughness 0.3 leaves the rim's
     // inside mostly for the sky): a few samples, each checked all the same.
     assert!(

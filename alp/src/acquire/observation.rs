@@ -294,10 +294,9 @@ fn observe_view(
             let segment = tape.to_vec(bright.segment);
             let mut bounce = vec![[0.0f32; 3]; hits.pixels.len()];
             let mut later = [1.0f32; 3];
-            for (level, &start) in bright.bounce_starts.iter().enumerate() {
-                let end = bright.bounce_starts.get(level + 1).copied().unwrap_or(segment.len());
+            for samples in bright.bounce_ranges() {
                 later = std::array::from_fn(|c| later[c] * bounce_albedo[c]);
-                for k in start..end {
+                for k in samples {
                     for c in 0..3 {
                         bounce[segment[k] as usize][c] += later[c] * bright_light[c][k];
                     }
