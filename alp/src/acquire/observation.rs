@@ -20,6 +20,13 @@
 //! the product of the two residuals is an unbiased estimate of the squared
 //! error under Monte Carlo noise, where one render's square adds the noise's
 //! variance (which depends on the material and so biases it).
+//!
+//! A pixel's weight is its relative squared error's, lowered by its
+//! render's noise ([`pixel_noise`]): a thin highlight of the sun swings
+//! by many times its value from one render to the next (the photo's, a
+//! path tracer's, as much), and in a relative error one such pixel
+//! outweighed thousands of quiet ones and darkened a can's lid to half its
+//! albedo.
 
 use glam::{Vec2, Vec3};
 use render::bsdf::Bsdf;
@@ -135,8 +142,12 @@ pub(crate) struct Budget {
     pub(crate) spp: u32,
     /// Most pixels of a view observed (a random share of a view with more).
     pub(crate) pixels_per_view: usize,
-    /// A pixel's weight is 1 / (its luminance + this share of its view's mean)^2.
+    /// A pixel's weight is 1 / ((its luminance + this share of its view's
+    /// mean)^2 + `noise_weight` times its render's noise variance).
     pub(crate) relative_floor: f64,
+    /// How much a pixel's Monte Carlo noise lowers its weight against its
+    /// relative error (see [`pixel_noise`]).
+    pub(crate) noise_weight: f64,
     /// A pixel's hits closer than this in u and v are merged (about half a
     /// texel of the finest texture read).
     pub(crate) merge_uv: [f32; 2],
@@ -150,8 +161,8 @@ pub(crate) struct Budget {
 pub(crate) struct PixelObservation {
     /// The photo's value.
     pub(crate) target: [f32; 3],
-    /// Its weight in the data term: relative squared error, each view's
-    /// pixels summing to 1 / (number of views).
+    /// Its weight in the data term: relative squared error, lowered by
+    /// its render's noise, over the view's pixels and the views.
     pub(crate) weight: f64,
     /// Per half: the render with albedo 0.
     pub(crate) offset: [[f32; 3]; 2],
@@ -250,6 +261,8 @@ fn observe_view(
     };
     // Per image pixel, its index in this view's observations.
     let mut row = vec![u32::MAX; view.slot.len()];
+    // Per observed pixel and half: its samples' luminance at `bounce_albedo`, summed and squared.
+    let mut spread: Vec<[Spread; 2]> = Vec::new();
     let passes = budget.spp.max(1).div_ceil(SPP_PER_PASS);
     for pass in 0..passes {
         let spp = SPP_PER_PASS.min(budget.spp.max(1) - pass * SPP_PER_PASS);
@@ -317,19 +330,22 @@ fn observe_view(
                         offset: [[0.0; 3]; 2],
                     });
                     pixel_hits.push(Vec::new());
+                    spread.push(Default::default());
                 }
             }
             for i in 0..n {
                 let j = hits.segment[i] as usize;
                 let r = row[hits.pixels[j] as usize];
                 let offset = &mut out.pixels[r as usize].offset[half as usize];
-                let mut slope = [0.0f32; 3];
+                let (mut slope, mut share) = ([0.0f32; 3], [0.0f32; 3]);
                 for c in 0..3 {
                     let dark_i = dark_light[c][i] + dark_light[c][i + n];
                     let bright_i = bright_light[c][i] + bright_light[c][i + n];
                     offset[c] += pass_share * dark_i;
                     slope[c] = pass_share * (bright_i - dark_i + bounce[j][c] / count[j] as f32);
+                    share[c] = pass_share * (dark_i + bounce_albedo[c] * (bright_i - dark_i));
                 }
+                spread[r as usize][half as usize].add(luminance(&share) as f64);
                 merge(
                     &mut pixel_hits[r as usize],
                     HitSlope {
@@ -342,15 +358,103 @@ fn observe_view(
             }
         }
     }
-    // Weights: relative squared error, the view's pixels summing to 1 /
-    // views (both halves read the same hits, so every pixel has both).
+    // Weights: relative squared error, less where the render is noisy,
+    // over the view's pixels and the views (both halves read the same
+    // hits, so every pixel has both).
+    let noise = pixel_noise(
+        &out.pixels,
+        &pixel_hits,
+        &spread,
+        &row,
+        view.camera.width as usize,
+        bounce_albedo,
+        budget.spp,
+    );
     let pixels = out.pixels.len();
     let floor = budget.relative_floor * view.mean_luminance();
-    for p in &mut out.pixels {
-        let scale = (luminance(&p.target).max(0.0) as f64 + floor).max(f64::MIN_POSITIVE);
-        p.weight = 1.0 / (scale * scale * pixels as f64 * views as f64);
+    for (p, noise) in out.pixels.iter_mut().zip(noise) {
+        let scale = luminance(&p.target).max(0.0) as f64 + floor;
+        p.weight =
+            1.0 / ((scale * scale + budget.noise_weight * noise).max(f64::MIN_POSITIVE) * (pixels * views) as f64);
     }
     (out.pixels, pixel_hits)
+}
+
+/// A pixel's samples' shares of its value: their sum and sum of squares.
+#[derive(Clone, Copy, Default)]
+struct Spread {
+    sum: f64,
+    squares: f64,
+}
+
+impl Spread {
+    fn add(&mut self, share: f64) {
+        self.sum += share;
+        self.squares += share * share;
+    }
+
+    /// The variance of the mean of `samples` samples whose shares (each
+    /// sample's value over `samples`) these are; 0 from one sample.
+    fn variance_of_mean(&self, samples: u32) -> f64 {
+        if samples < 2 {
+            return 0.0;
+        }
+        let n = samples as f64;
+        ((n * self.squares - self.sum * self.sum) / (n - 1.0)).max(0.0)
+    }
+}
+
+/// Per observed pixel, the variance of its render's luminance at albedo
+/// `bounce_albedo` under Monte Carlo noise: the larger of two estimates,
+/// from the spread of its samples (primary rays and light) and from its
+/// two halves' difference (which also sees the bounces' noise, spread
+/// evenly over a pixel's samples), averaged over its observed 3x3
+/// neighbours (`row`: image pixel -> observed pixel, `width` wide). A thin
+/// highlight of the sun is where it matters: its pixels swing from render
+/// to render by many times their value, the photo's (a path tracer's) as
+/// much as ours, and one such pixel outweighs thousands of quiet ones in a
+/// relative error; its neighbours along the highlight tell its noise when
+/// its own samples happened to agree.
+fn pixel_noise(
+    pixels: &[PixelObservation],
+    pixel_hits: &[Vec<HitSlope>],
+    spread: &[[Spread; 2]],
+    row: &[u32],
+    width: usize,
+    bounce_albedo: [f32; 3],
+    spp: u32,
+) -> Vec<f64> {
+    let own: Vec<f64> = (0..pixels.len())
+        .map(|k| {
+            let half_value = |half: usize| -> f64 {
+                let mut v = pixels[k].offset[half];
+                for h in pixel_hits[k].iter().filter(|h| h.half as usize == half) {
+                    (0..3).for_each(|c| v[c] += bounce_albedo[c] * h.slope[c]);
+                }
+                luminance(&v) as f64
+            };
+            let within = (spread[k][0].variance_of_mean(spp) + spread[k][1].variance_of_mean(spp)) / 2.0;
+            // Two estimates of one half's value differ by twice its variance, in expectation.
+            within.max((half_value(0) - half_value(1)).powi(2) / 2.0)
+        })
+        .collect();
+    let height = row.len() / width.max(1);
+    let mut pooled = vec![0.0; pixels.len()];
+    for (p, &r) in row.iter().enumerate().filter(|(_, r)| **r != u32::MAX) {
+        let (x, y) = (p % width, p / width);
+        let (mut sum, mut count) = (0.0, 0.0);
+        for ny in y.saturating_sub(1)..(y + 2).min(height) {
+            for nx in x.saturating_sub(1)..(x + 2).min(width) {
+                let n = row[ny * width + nx];
+                if n != u32::MAX {
+                    sum += own[n as usize];
+                    count += 1.0;
+                }
+            }
+        }
+        pooled[r as usize] = sum / count;
+    }
+    pooled
 }
 
 /// New random numbers, from `seed`, for the light samples of `hits` (the
@@ -421,4 +525,54 @@ pub(crate) fn grid_neighbours(k: usize, width: usize, height: usize) -> [Option<
 pub(crate) fn grid_pairs(k: usize, width: usize, height: usize) -> [Option<usize>; 2] {
     let [_, right, _, down] = grid_neighbours(k, width, height);
     [right, down]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_spread_gives_the_variance_of_the_mean() {
+        let values = [1.0, 4.0, 0.0, 3.0];
+        let n = values.len() as f64;
+        let mut spread = Spread::default();
+        values.iter().for_each(|v| spread.add(v / n));
+        let mean = values.iter().sum::<f64>() / n;
+        let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        assert!((spread.variance_of_mean(4) - variance / n).abs() < 1e-12);
+        assert_eq!(spread.variance_of_mean(1), 0.0);
+    }
+
+    #[test]
+    fn a_pixels_noise_is_its_neighbourhoods() {
+        // A 3 x 2 image, its top-left pixel unobserved. Pixel (1, 0): its
+        // halves 0.2 and 0.6 apart in luminance (offsets alone, no hits);
+        // pixel (2, 1): its samples spread; the others quiet.
+        let (width, row) = (3, vec![u32::MAX, 0, 1, 2, 3, 4]);
+        let quiet = PixelObservation {
+            target: [0.5; 3],
+            weight: 0.0,
+            offset: [[0.5; 3]; 2],
+        };
+        let mut pixels = vec![quiet; 5];
+        pixels[0].offset = [[0.2; 3], [0.8; 3]];
+        let mut spread = vec![[Spread::default(); 2]; 5];
+        for half in &mut spread[4] {
+            [0.0, 1.0].iter().for_each(|v| half.add(v / 2.0));
+        }
+        let noise = pixel_noise(&pixels, &vec![Vec::new(); 5], &spread, &row, width, [0.7; 3], 2);
+        // Own estimates: 0.6^2 / 2 = 0.18 at (1, 0), the sample variance
+        // of {0, 1} over 2 samples = 0.25 at (2, 1), 0 elsewhere.
+        let own = [0.18, 0.0, 0.0, 0.0, 0.25];
+        let expect = [
+            (own[0] + own[1] + own[2] + own[3] + own[4]) / 5.0, // (1, 0): 5 observed neighbours
+            (own[0] + own[1] + own[3] + own[4]) / 4.0,          // (2, 0)
+            (own[0] + own[2] + own[3]) / 3.0,                   // (0, 1)
+            (own[0] + own[1] + own[2] + own[3] + own[4]) / 5.0, // (1, 1)
+            (own[0] + own[1] + own[3] + own[4]) / 4.0,          // (2, 1)
+        ];
+        for (k, (got, want)) in noise.iter().zip(expect).enumerate() {
+            assert!((got - want).abs() < 1e-6, "pixel {k}: {got} against {want}");
+        }
+    }
 }
