@@ -361,16 +361,21 @@ fn observe_view(
     // Weights: relative squared error, less where the render is noisy,
     // over the view's pixels and the views (both halves read the same
     // hits, so every pixel has both).
-    let noise = pixel_noise(
-        &out.pixels,
-        &pixel_hits,
-        &spread,
-        &row,
-        view.camera.width as usize,
-        bounce_albedo,
-        budget.spp,
-    );
     let pixels = out.pixels.len();
+    let noise = if budget.noise_weight > 0.0 {
+        let width = view.camera.width as usize;
+        pixel_noise(
+            &out.pixels,
+            &pixel_hits,
+            &spread,
+            &row,
+            width,
+            bounce_albedo,
+            budget.spp,
+        )
+    } else {
+        vec![0.0; pixels]
+    };
     let floor = budget.relative_floor * view.mean_luminance();
     for (p, noise) in out.pixels.iter_mut().zip(noise) {
         let scale = luminance(&p.target).max(0.0) as f64 + floor;
@@ -409,12 +414,9 @@ impl Spread {
 /// from the spread of its samples (primary rays and light) and from its
 /// two halves' difference (which also sees the bounces' noise, spread
 /// evenly over a pixel's samples), averaged over its observed 3x3
-/// neighbours (`row`: image pixel -> observed pixel, `width` wide). A thin
-/// highlight of the sun is where it matters: its pixels swing from render
-/// to render by many times their value, the photo's (a path tracer's) as
-/// much as ours, and one such pixel outweighs thousands of quiet ones in a
-/// relative error; its neighbours along the highlight tell its noise when
-/// its own samples happened to agree.
+/// neighbours (`row`: image pixel -> observed pixel, `width` wide): along
+/// a highlight, the neighbours tell a pixel's noise when its own samples
+/// happened to agree.
 fn pixel_noise(
     pixels: &[PixelObservation],
     pixel_hits: &[Vec<HitSlope>],
