@@ -8,6 +8,14 @@
 //!    that fits its pixels best. At every placement the scan might have (a
 //!    scan's two ends can cast the same outline); the one that fits best
 //!    goes on.
+//! 1. The turn about the scan's axis, by the same search: a scan nearly of
+//!    revolution (a cap's grooves) shows a turn in its outline only
+//!    faintly, and a turn of a degree moves a groove's highlights onto the
+//!    next texels, which the search explains by a rough, dark surface. The
+//!    search's error, each cell at its best roughness and albedo, is the
+//!    pose's cost with the textures fitted at it (not held, which would
+//!    absorb the pose's error); a compass search over the turn keeps the
+//!    least.
 //! 2. The albedo exactly (`albedo.rs`): the views are affine in it
 //!    (`observation.rs`), so its texels are a least-squares solve,
 //!    coarse to fine in texture size, with a smoothness prior that fills
@@ -21,6 +29,7 @@
 
 use std::time::Instant;
 
+use glam::{DVec3, Quat};
 use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
 use render::pose::Pose;
@@ -31,8 +40,9 @@ use super::albedo::{AlbedoFit, AlbedoSolve, AlbedoSystem};
 use super::capture::Capture;
 use super::material::{LossTerms, MaterialFit, StageReport, level_sizes, resample};
 use super::observation::{Budget, Observations, Placed, observe};
-use super::roughness::{RoughnessSearch, search};
+use super::roughness::{RoughnessFit, RoughnessSearch, search};
 use crate::error::Result;
+use crate::estimate::{self, symmetry};
 
 /// What the texture solve trades.
 #[derive(Clone, Debug, Serialize)]
@@ -84,6 +94,13 @@ pub struct LeastSquaresSettings {
     /// Information (the data's curvature in a texel over an average
     /// texel's) a texel needs to count as seen (coverage 1).
     pub well_seen: f64,
+    /// Most roughness searches spent on the turn about the scan's axis
+    /// (none for a scan wholly of revolution, whose texture takes up any
+    /// turn): each costs a search's time; 0 keeps the silhouettes' turn.
+    pub turn_searches: usize,
+    /// The turn search's first step and its last (degrees): the first
+    /// spans the silhouettes' error, the last is what it resolves.
+    pub turn_step_deg: [f64; 2],
 }
 
 impl Default for LeastSquaresSettings {
@@ -104,6 +121,8 @@ impl Default for LeastSquaresSettings {
             relative_floor: 0.5,
             noise_weight: 64.0,
             well_seen: 0.5,
+            turn_searches: 6,
+            turn_step_deg: [0.5, 0.125],
         }
     }
 }
@@ -117,8 +136,9 @@ const ALBEDO_SEED: u64 = 0xA1BED0;
 
 /// Solves for the material of the capture's scan at texture size `size`
 /// (width, height), placed at whichever of `placements` the roughness
-/// search fits best; `progress` hears (units done, units in all). Returns
-/// the fit and the index of the placement kept.
+/// search fits best, turned about its axis as the search fits best;
+/// `progress` hears (units done, units in all). Returns the fit, the index
+/// of the placement kept and its pose as turned.
 pub fn solve(
     capture: &Capture,
     placements: &[Pose],
@@ -126,7 +146,7 @@ pub fn solve(
     bsdf: &dyn Bsdf<f32>,
     settings: &LeastSquaresSettings,
     progress: &dyn Fn(usize, usize),
-) -> Result<(MaterialFit, usize)> {
+) -> Result<(MaterialFit, usize, Pose)> {
     let sizes = level_sizes(size, placements.len(), settings.levels)?;
     let [width, height] = size;
     let ladder = RoughnessSearch {
@@ -153,8 +173,13 @@ pub fn solve(
     // noise discount the very pixels that tell a smooth surface (both
     // measured worse: results 17.3).
     let search_budget = budget(settings.search_spp, settings.search_pixels_per_view, 0.0, SEARCH_SEED);
+    // The axis a turn about shows faintly, if any.
+    let symmetry_settings = estimate::Settings::default().symmetry;
+    let turn_axis = symmetry::axis_line(&capture.mesh, &symmetry_settings)
+        .filter(|_| settings.turn_searches > 0 && symmetry::turns_show(&capture.mesh, &symmetry_settings));
+    let turn_searches = if turn_axis.is_some() { settings.turn_searches } else { 0 };
     // Progress units: a rung of a search, the observation, an albedo level.
-    let total = ladder.rungs * placements.len() + 1 + sizes.len();
+    let total = ladder.rungs * (placements.len() + turn_searches) + 1 + sizes.len();
     let done = std::cell::Cell::new(0);
     let tick = || {
         done.set(done.get() + 1);
@@ -173,17 +198,37 @@ pub fn solve(
             data_loss: fit.data,
             kept: false,
             seconds: t0.elapsed().as_secs_f64(),
+            turn_deg: None,
         });
         fits.push(fit);
     }
     let chosen = (0..fits.len())
         .min_by(|&a, &b| fits[a].data.total_cmp(&fits[b].data))
         .expect("at least one placement");
-    stages[chosen].kept = true;
     let rough = fits.swap_remove(chosen);
+    let turn = turn_axis.map(|axis| {
+        let evaluate = |at: &Pose| {
+            let placed = Placed::new(capture, at, bsdf);
+            search(&placed, &ladder, &search_budget, [INITIAL_ALBEDO; 3], &|_| tick())
+        };
+        search_turn(&placements[chosen], axis, rough.data, settings, turn_searches, evaluate)
+    });
+    // The turn found, if it beat the silhouettes'.
+    let (rough, pose, turned_placed) = match turn {
+        Some((searched, Some((fit, at)))) => {
+            stages.extend(searched);
+            (fit, at, Some(Placed::new(capture, &at, bsdf)))
+        }
+        other => {
+            stages.extend(other.into_iter().flat_map(|(searched, _)| searched));
+            stages[chosen].kept = true;
+            (rough, placements[chosen], None)
+        }
+    };
+    let placed_at = turned_placed.as_ref().unwrap_or(&placed[chosen]);
     let t0 = Instant::now();
     let obs = observe(
-        &placed[chosen],
+        placed_at,
         &Texture {
             image: rough.roughness.clone(),
         },
@@ -202,6 +247,7 @@ pub fn solve(
         data_loss: f64::NAN,
         kept: true,
         seconds: t0.elapsed().as_secs_f64(),
+        turn_deg: None,
     });
     tick();
     let start = RgbImage::filled(1, 1, rough.mean_albedo);
@@ -229,7 +275,113 @@ pub fn solve(
         },
         stages,
     };
-    Ok((fit, chosen))
+    Ok((fit, chosen, pose))
+}
+
+/// The turn of `pose` about `axis` (its direction and a point on it, the
+/// scan's coordinates) that the roughness search (`evaluate`, at a pose)
+/// fits best, by a compass search from `pose`, whose search error is
+/// `at_start`: a report of every search, the best kept, and the best's fit
+/// and pose when one beat the start.
+fn search_turn(
+    pose: &Pose,
+    (axis, point): (DVec3, DVec3),
+    at_start: f64,
+    settings: &LeastSquaresSettings,
+    searches: usize,
+    evaluate: impl Fn(&Pose) -> RoughnessFit,
+) -> (Vec<StageReport>, Option<(RoughnessFit, Pose)>) {
+    let mut stages = Vec::new();
+    let (degrees, best) = compass_search(
+        at_start,
+        settings.turn_step_deg,
+        searches,
+        |degrees| {
+            let t0 = Instant::now();
+            let at = turned(pose, axis, point, degrees);
+            let fit = evaluate(&at);
+            stages.push(StageReport {
+                stage: "turn".into(),
+                size: [fit.roughness.width, fit.roughness.height],
+                iterations: settings.roughness_rungs.max(2),
+                data_loss: fit.data,
+                kept: false,
+                seconds: t0.elapsed().as_secs_f64(),
+                turn_deg: Some(degrees),
+            });
+            (fit, at)
+        },
+        |(fit, _)| fit.data,
+    );
+    if best.is_some() {
+        stages
+            .iter_mut()
+            .filter(|s| s.turn_deg == Some(degrees))
+            .for_each(|s| s.kept = true);
+    }
+    (stages, best)
+}
+
+/// `pose` after a turn by `degrees` about the line along `axis` through
+/// `point` (the scan's coordinates).
+fn turned(pose: &Pose, axis: DVec3, point: DVec3, degrees: f64) -> Pose {
+    let turn = Quat::from_axis_angle(axis.normalize().as_vec3(), degrees.to_radians() as f32);
+    let c = point.as_vec3();
+    // p -> c + turn (p - c), then the pose.
+    Pose::new(
+        pose.rotation * turn,
+        pose.scale,
+        pose.translation + pose.rotation * (pose.scale * (c - turn * c)),
+    )
+}
+
+/// A compass search of one number from 0 (where the cost is `at_start`):
+/// steps of `first` on either side, halved when neither side lowers the
+/// cost, down to `last`, at most `evaluations` evaluations (`evaluate` of
+/// the number; `cost` of its answer). Returns the best number and its
+/// answer (none when nothing beat the start). A step the search has taken
+/// it does not take again.
+fn compass_search<T>(
+    at_start: f64,
+    [first, last]: [f64; 2],
+    evaluations: usize,
+    mut evaluate: impl FnMut(f64) -> T,
+    cost: impl Fn(&T) -> f64,
+) -> (f64, Option<T>) {
+    let mut tried = vec![(0.0, at_start)];
+    let (mut x, mut fx, mut best) = (0.0, at_start, None);
+    let (mut step, mut direction, mut failed_sides) = (first, 1.0, 0);
+    let mut left = evaluations;
+    while left > 0 && step >= last * (1.0 - 1e-9) {
+        let candidate = x + direction * step;
+        let known = tried
+            .iter()
+            .find(|(t, _)| (t - candidate).abs() <= 1e-9 * first.abs().max(1e-300));
+        let value = match known {
+            Some(&(_, value)) => value,
+            None => {
+                left -= 1;
+                let answer = evaluate(candidate);
+                let value = cost(&answer);
+                tried.push((candidate, value));
+                if value < fx {
+                    best = Some(answer);
+                }
+                value
+            }
+        };
+        if value < fx {
+            (x, fx, failed_sides) = (candidate, value, 0);
+            continue;
+        }
+        direction = -direction;
+        failed_sides += 1;
+        if failed_sides == 2 {
+            step /= 2.0;
+            failed_sides = 0;
+        }
+    }
+    (x, best)
 }
 
 /// The albedo of `obs`, coarse to fine over `sizes` from `start`, each
@@ -264,6 +416,7 @@ fn solve_albedo(
             data_loss: fit.data,
             kept,
             seconds: t0.elapsed().as_secs_f64(),
+            turn_deg: None,
         });
         level_done();
         if !kept {
@@ -273,4 +426,48 @@ fn solve_albedo(
         last = Some((fit, [w, h]));
     }
     (albedo, last.expect("at least one level"))
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+
+    #[test]
+    fn the_compass_search_walks_to_a_minimum_and_halves_its_step() {
+        let mut evaluated = Vec::new();
+        let (x, best) = compass_search(
+            0.83,
+            [0.5, 0.125],
+            6,
+            |x| {
+                evaluated.push(x);
+                (x - 0.83f64).abs()
+            },
+            |&f| f,
+        );
+        // 0.5 and 1.0 better, 1.5 not; 0.5 known worse than 1.0; halved:
+        // 1.25 worse, 0.75 better; 0.5 known; halved: 0.625 worse, the budget spent.
+        assert_eq!(evaluated, vec![0.5, 1.0, 1.5, 1.25, 0.75, 0.625]);
+        assert_eq!(x, 0.75);
+        assert!((best.unwrap() - 0.08).abs() < 1e-12);
+        // Nothing beats the start: it stays, with no answer.
+        let (x, best) = compass_search(0.0, [0.5, 0.125], 10, |x: f64| x.abs(), |&f| f);
+        assert_eq!((x, best), (0.0, None));
+    }
+
+    #[test]
+    fn a_turn_keeps_the_axis_and_turns_the_rest_about_it() {
+        let pose = Pose::new(Quat::from_rotation_x(0.3), 2.0, Vec3::new(1.0, -2.0, 0.5));
+        let (axis, point) = (DVec3::new(0.0, 3.0, 4.0), DVec3::new(1.0, 0.0, 0.0));
+        let at = turned(&pose, axis, point, 90.0);
+        let on_axis = (point + axis * 0.7).as_vec3();
+        assert!(at.transform_point(on_axis).distance(pose.transform_point(on_axis)) < 1e-5);
+        // A point a unit off the axis, across it: turned a quarter about it.
+        let across = DVec3::X.as_vec3();
+        let off = point.as_vec3() + across;
+        let expected = point.as_vec3() + (axis.normalize().as_vec3()).cross(across);
+        assert!(at.transform_point(off).distance(pose.transform_point(expected)) < 1e-5);
+    }
 }

@@ -111,8 +111,9 @@ impl Default for MaterialSettings {
 #[derive(Clone, Debug, Serialize)]
 pub struct StageReport {
     /// "level" (an Adam level); with the least-squares solve, "roughness"
-    /// (a placement's search), "observation" (the albedo's renders) or
-    /// "albedo" (one texture size).
+    /// (a placement's search), "turn" (a search at a turn about the scan's
+    /// axis), "observation" (the albedo's renders) or "albedo" (one texture
+    /// size).
     pub stage: String,
     /// Texture or grid width and height (an observation: its pixels and hits).
     pub size: [usize; 2],
@@ -126,6 +127,10 @@ pub struct StageReport {
     pub kept: bool,
     /// Seconds spent.
     pub seconds: f64,
+    /// A turn search's turn about the scan's axis from the silhouettes'
+    /// (degrees).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub turn_deg: Option<f64>,
 }
 
 /// The loss's terms at the end of the solve.
@@ -635,6 +640,7 @@ impl<'a> Problem<'a> {
             data_loss,
             kept: true,
             seconds: t0.elapsed().as_secs_f64(),
+            turn_deg: None,
         };
         let terms = LossTerms {
             data: data_loss,

@@ -202,17 +202,20 @@ pub fn acquire(
     let placements = placement::place(capture, &settings.placement)?;
     let placed = Instant::now();
     let poses: Vec<_> = placements.iter().map(|p| p.to_world).collect();
-    let textures = |poses: &[Pose], phase: &str| -> Result<(MaterialFit, usize)> {
+    // The fit, the placement kept and its pose (the least-squares solve turns it).
+    let textures = |poses: &[Pose], phase: &str| -> Result<(MaterialFit, usize, Pose)> {
         let progress = |done, all| progress(phase, done, all);
         match settings.solver {
-            Solver::Adam => material::solve(capture, poses, size, bsdf, &settings.material, &progress),
+            Solver::Adam => material::solve(capture, poses, size, bsdf, &settings.material, &progress)
+                .map(|(fit, chosen)| (fit, chosen, poses[chosen])),
             Solver::LeastSquares => {
                 least_squares::solve(capture, poses, size, bsdf, &settings.least_squares, &progress)
             }
         }
     };
-    let (mut fit, chosen) = textures(&poses, "textures")?;
+    let (mut fit, chosen, pose) = textures(&poses, "textures")?;
     let mut placement = placements[chosen];
+    placement.to_world = pose;
     let solved = Instant::now();
     let registration = match &settings.registration {
         Some(r) => {

@@ -48,8 +48,7 @@ pub fn turned_back(pose: &Pose, to_y: Quat) -> Pose {
 /// directions, the one nearer +Y, or with its largest component positive,
 /// goes to +Y.
 pub fn axis_to_y(mesh: &Mesh, s: &SymmetrySettings) -> Quat {
-    let revolved = axis_of_revolution(mesh, s).map(|revolution| revolution.axis);
-    let Some(axis) = revolved.or_else(|| axis_of_spread(mesh, s)) else {
+    let Some((axis, _)) = axis_line(mesh, s) else {
         return Quat::IDENTITY;
     };
     if axis.y.abs() >= s.axis_is_y_deg.to_radians().cos() {
@@ -324,8 +323,9 @@ pub(super) const CIRCLE_SAMPLES: [[f32; 2]; 4] = [
 ];
 
 /// The principal direction of the surface's spread that stands out from
-/// the other two, if one does (see [`axis_to_y`]).
-pub(super) fn axis_of_spread(mesh: &Mesh, s: &SymmetrySettings) -> Option<DVec3> {
+/// the other two, if one does (see [`axis_to_y`]), and the surface's
+/// centroid, which it passes through.
+pub(super) fn axis_of_spread(mesh: &Mesh, s: &SymmetrySettings) -> Option<(DVec3, DVec3)> {
     let (mut area, mut first, mut second) = (0.0f64, [0.0f64; 3], [[0.0f64; 3]; 3]);
     for t in 0..mesh.triangles.len() {
         let [a, b, c] = mesh.corners(t).map(|p| p.as_dvec3());
@@ -354,7 +354,17 @@ pub(super) fn axis_of_spread(mesh: &Mesh, s: &SymmetrySettings) -> Option<DVec3>
         true => (high / mid, vectors[order[2]]),
         false => (mid / low, vectors[order[0]]),
     };
-    (stands_out >= s.distinct_spread).then(|| DVec3::from_array(axis))
+    (stands_out >= s.distinct_spread).then(|| (DVec3::from_array(axis), DVec3::from_array(mean)))
+}
+
+/// The probe's axis as a line, its direction and a point on it: the axis
+/// of revolution, else the axis of spread through the surface's centroid
+/// (a grooved cap's, whose grooves take most of its area off the test of
+/// revolution and keep its spread's symmetry).
+pub fn axis_line(mesh: &Mesh, s: &SymmetrySettings) -> Option<(DVec3, DVec3)> {
+    axis_of_revolution(mesh, s)
+        .map(|revolution| (revolution.axis, revolution.point))
+        .or_else(|| axis_of_spread(mesh, s))
 }
 
 /// Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix, by cyclic
@@ -525,7 +535,7 @@ mod tests {
         let axis = axis_of_revolution(&mug, &s()).expect("the body's axis").axis;
         assert!(axis.y.abs() > 0.5f64.to_radians().cos(), "axis {axis}");
         // The surface's spread alone would take another direction for it.
-        let spread = axis_of_spread(&mug, &s()).expect("a direction stands out");
+        let (spread, _) = axis_of_spread(&mug, &s()).expect("a direction stands out");
         assert!(spread.y.abs() < 0.5, "spread {spread}");
         assert_eq!(axis_to_y(&mug, &s()), Quat::IDENTITY);
         // Its handle shows how it is turned; a can and a cap show nothing.
@@ -650,7 +660,10 @@ mod tests {
         let cuboid = Mesh::new(positions, vec![Vec3::Y; n], vec![Vec2::ZERO; n], triangles);
         assert_eq!(axis_of_revolution(&cuboid, &s()), None);
         assert!(turns_show(&cuboid, &s()));
-        let spread = axis_of_spread(&cuboid, &s()).expect("a side that stands out");
+        let (spread, centroid) = axis_of_spread(&cuboid, &s()).expect("a side that stands out");
         assert!(spread.abs().max_element() > 0.999, "spread {spread}");
+        // The box is centred on the origin: its axis passes through it.
+        assert!(centroid.length() < 1e-6, "centroid {centroid}");
+        assert_eq!(axis_line(&cuboid, &s()), Some((spread, centroid)));
     }
 }
