@@ -7,7 +7,8 @@
 //! pointed in directions spread over the sphere. Each start is fitted by
 //! Adam on the soft masks' L1 and Chamfer losses summed over the views; the
 //! best few are fitted on, and the best kept. A turn about an axis of
-//! revolution does not show in silhouettes: the texture solve takes it up.
+//! revolution does not show in silhouettes: the texture solve takes it up
+//! (a grooved cap's, which shows faintly, the least-squares solve searches).
 
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
