@@ -6,7 +6,7 @@ scenes of that probe (tools/bench_scenes.py's draw of pose, lighting, camera and
 once with the true asset and once with the acquired one. Tune on train; report test.
 
     python3 tools/capture_bench.py --out DIR --alp target/release/alp [--label main] [--splits train,test]
-        [--probes 12] [--views 32] [--scenes 6] [--acquire-args "--solver least-squares"]
+        [--probes 12] [--views 32] [--scenes 6] [--acquire-args "--solver adam"]
 
 Layout (every stage is written whole and kept, so an interrupted run resumes):
     DIR/<split>/<NN_family>/probe/          the true probe (bench_probes.py), info.json what was drawn

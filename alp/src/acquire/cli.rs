@@ -33,9 +33,11 @@ pub struct AcquireArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Texture solve: adam (Adam on the re-rendering error) or least-squares
-    /// (a roughness search and an exact albedo solve: faster, see docs/results.md 13).
-    #[arg(long, default_value = "adam")]
+    /// Texture solve: least-squares (a roughness search, a grooved scan's
+    /// turn by the same search, and an exact albedo solve) or adam (Adam on
+    /// the re-rendering error: several times slower, and less accurate on
+    /// the capture benchmark's train probes, see docs/results.md 17.4).
+    #[arg(long, default_value = "least-squares")]
     pub solver: String,
     /// on: the pose refined against the views' pixels once the textures are
     /// fitted, and the textures solved again at it (more than twice the

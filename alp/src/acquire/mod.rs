@@ -44,9 +44,9 @@ use registration::{RegistrationReport, RegistrationSettings};
 pub enum Solver {
     /// Adam on the re-rendering error, differentiated in the textures ([`material`]).
     Adam,
-    /// A roughness search and an exact albedo solve ([`least_squares`]):
-    /// several times faster, the roughness closer; its albedo is worse where
-    /// a recess is lit by the probe's own reflections (docs/results.md 13).
+    /// A roughness search and an exact albedo solve ([`least_squares`]), the
+    /// default: several times faster than Adam, and closer on the capture
+    /// benchmark's train probes (docs/results.md 17.4).
     LeastSquares,
 }
 
@@ -78,7 +78,7 @@ impl AcquireSettings {
         let default = AcquireSettings {
             quality,
             placement: PlacementSettings::default(),
-            solver: Solver::Adam,
+            solver: Solver::LeastSquares,
             material: MaterialSettings::default(),
             least_squares: LeastSquaresSettings::default(),
             registration: None,
