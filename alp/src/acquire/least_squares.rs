@@ -1,14 +1,14 @@
 //! The texture solve by least squares (`alp acquire --solver
-//! least-squares`), the alternative to [`super::material`]'s Adam: the same
-//! forward model and data term, inverted without a step size, in two parts
-//! that each fit what it can tell:
+//! least-squares`, the default), the alternative to [`super::material`]'s
+//! Adam: the same forward model and data term, inverted without a step
+//! size, in parts that each fit what it can tell:
 //!
 //! 1. The roughness by search (`roughness.rs`): every view rendered
 //!    at a ladder of roughnesses, each cell of a coarse grid taking the rung
 //!    that fits its pixels best. At every placement the scan might have (a
 //!    scan's two ends can cast the same outline); the one that fits best
 //!    goes on.
-//! 1. The turn about the scan's axis, by the same search: a scan nearly of
+//! 2. The turn about the scan's axis, by the same search: a scan nearly of
 //!    revolution (a cap's grooves) shows a turn in its outline only
 //!    faintly, and a turn of a degree moves a groove's highlights onto the
 //!    next texels, which the search explains by a rough, dark surface. The
@@ -16,7 +16,7 @@
 //!    pose's cost with the textures fitted at it (not held, which would
 //!    absorb the pose's error); a compass search over the turn keeps the
 //!    least.
-//! 2. The albedo exactly (`albedo.rs`): the views are affine in it
+//! 3. The albedo exactly (`albedo.rs`): the views are affine in it
 //!    (`observation.rs`), so its texels are a least-squares solve,
 //!    coarse to fine in texture size, with a smoothness prior that fills
 //!    what no view saw.
@@ -209,15 +209,16 @@ pub fn solve(
     let turn = turn_axis.map(|axis| {
         let evaluate = |at: &Pose| {
             let placed = Placed::new(capture, at, bsdf);
-            search(&placed, &ladder, &search_budget, [INITIAL_ALBEDO; 3], &|_| tick())
+            let fit = search(&placed, &ladder, &search_budget, [INITIAL_ALBEDO; 3], &|_| tick());
+            (fit, placed)
         };
         search_turn(&placements[chosen], axis, rough.data, settings, turn_searches, evaluate)
     });
     // The turn found, if it beat the silhouettes'.
     let (rough, pose, turned_placed) = match turn {
-        Some((searched, Some((fit, at)))) => {
+        Some((searched, Some((fit, at, placed)))) => {
             stages.extend(searched);
-            (fit, at, Some(Placed::new(capture, &at, bsdf)))
+            (fit, at, Some(placed))
         }
         other => {
             stages.extend(other.into_iter().flat_map(|(searched, _)| searched));
@@ -281,16 +282,16 @@ pub fn solve(
 /// The turn of `pose` about `axis` (its direction and a point on it, the
 /// scan's coordinates) that the roughness search (`evaluate`, at a pose)
 /// fits best, by a compass search from `pose`, whose search error is
-/// `at_start`: a report of every search, the best kept, and the best's fit
-/// and pose when one beat the start.
-fn search_turn(
+/// `at_start`: a report of every search, the best kept, and the best's fit,
+/// pose and placed capture when one beat the start.
+fn search_turn<'a>(
     pose: &Pose,
     (axis, point): (DVec3, DVec3),
     at_start: f64,
     settings: &LeastSquaresSettings,
     searches: usize,
-    evaluate: impl Fn(&Pose) -> RoughnessFit,
-) -> (Vec<StageReport>, Option<(RoughnessFit, Pose)>) {
+    evaluate: impl Fn(&Pose) -> (RoughnessFit, Placed<'a>),
+) -> (Vec<StageReport>, Option<(RoughnessFit, Pose, Placed<'a>)>) {
     let mut stages = Vec::new();
     let (degrees, best) = compass_search(
         at_start,
@@ -299,7 +300,7 @@ fn search_turn(
         |degrees| {
             let t0 = Instant::now();
             let at = turned(pose, axis, point, degrees);
-            let fit = evaluate(&at);
+            let (fit, placed) = evaluate(&at);
             stages.push(StageReport {
                 stage: "turn".into(),
                 size: [fit.roughness.width, fit.roughness.height],
@@ -309,9 +310,9 @@ fn search_turn(
                 seconds: t0.elapsed().as_secs_f64(),
                 turn_deg: Some(degrees),
             });
-            (fit, at)
+            (fit, at, placed)
         },
-        |(fit, _)| fit.data,
+        |(fit, _, _)| fit.data,
     );
     if best.is_some() {
         stages
