@@ -174,9 +174,8 @@ pub fn solve(
     // measured worse: results 17.3).
     let search_budget = budget(settings.search_spp, settings.search_pixels_per_view, 0.0, SEARCH_SEED);
     // The axis a turn about shows faintly, if any.
-    let symmetry_settings = estimate::Settings::default().symmetry;
-    let turn_axis = symmetry::axis_line(&capture.mesh, &symmetry_settings)
-        .filter(|_| settings.turn_searches > 0 && symmetry::turns_show(&capture.mesh, &symmetry_settings));
+    let turn_axis = symmetry::axis_turns_show_about(&capture.mesh, &estimate::Settings::default().symmetry)
+        .filter(|_| settings.turn_searches > 0);
     let turn_searches = if turn_axis.is_some() { settings.turn_searches } else { 0 };
     // Progress units: a rung of a search, the observation, an albedo level.
     let total = ladder.rungs * (placements.len() + turn_searches) + 1 + sizes.len();

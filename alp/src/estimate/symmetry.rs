@@ -178,6 +178,18 @@ pub fn turns_show(mesh: &Mesh, s: &SymmetrySettings) -> bool {
     turns_show_about(mesh, axis_of_revolution(mesh, s).as_ref(), s)
 }
 
+/// The axis (as [`axis_line`] gives it) when a turn about it changes the
+/// probe's outline ([`turns_show`]: a grooved cap, a mug), none when it
+/// does not (a can) or the probe has none; the axis of revolution is
+/// fitted once for both.
+pub fn axis_turns_show_about(mesh: &Mesh, s: &SymmetrySettings) -> Option<(DVec3, DVec3)> {
+    match axis_of_revolution(mesh, s) {
+        Some(revolution) => turns_show_about(mesh, Some(&revolution), s).then_some((revolution.axis, revolution.point)),
+        // Without an axis of revolution a turn shows about the axis of spread.
+        None => axis_of_spread(mesh, s),
+    }
+}
+
 /// [`turns_show`] given the mesh's axis of revolution, if it has one.
 pub(super) fn turns_show_about(mesh: &Mesh, revolution: Option<&Revolution>, s: &SymmetrySettings) -> bool {
     match revolution {
@@ -540,11 +552,13 @@ mod tests {
         assert_eq!(axis_to_y(&mug, &s()), Quat::IDENTITY);
         // Its handle shows how it is turned; a can and a cap show nothing.
         assert!(turns_show(&mug, &s()));
+        assert_eq!(axis_turns_show_about(&mug, &s()).map(|line| line.0), Some(axis));
         for probe in [
             SodaCan::default().build(),
             render::procedural::ThermosCap::default().build(),
         ] {
             assert!(!turns_show(&probe.mesh, &s()));
+            assert_eq!(axis_turns_show_about(&probe.mesh, &s()), None);
         }
         let turn = Quat::from_axis_angle(Vec3::new(0.3, -0.5, 0.8).normalize(), 1.9);
         let built = mug.posed(&Pose::new(turn, 1.0, Vec3::new(0.2, -0.1, 0.05)));
@@ -665,5 +679,6 @@ mod tests {
         // The box is centred on the origin: its axis passes through it.
         assert!(centroid.length() < 1e-6, "centroid {centroid}");
         assert_eq!(axis_line(&cuboid, &s()), Some((spread, centroid)));
+        assert_eq!(axis_turns_show_about(&cuboid, &s()), Some((spread, centroid)));
     }
 }
