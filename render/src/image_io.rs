@@ -11,6 +11,93 @@ use exr::prelude::{
 
 use crate::error::{RenderError, Result};
 
+/// The most pixels an image read from a file may have (2^28: a 16384 x
+/// 16384 map): a header that claims more is broken or hostile, and is
+/// refused before anything is allocated for it.
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// The most an OpenEXR file's pixels may expand over its length: deflate's
+/// bound (1032:1) times PXR24's 4:3 (its floats stored in 3 bytes), with
+/// room. No codec the reader knows expands more, so a header claiming more
+/// pixel bytes than this allows is not the file's.
+const MAX_EXR_EXPANSION: u64 = 2048;
+
+/// The most bytes a decoder of PNG, JPEG or Radiance HDR may allocate:
+/// `MAX_PIXELS` of 8-bit RGBA.
+const MAX_DECODE_BYTES: u64 = 4 * MAX_PIXELS;
+
+/// Fails on a `width x height` image of `path` with more than [`MAX_PIXELS`].
+pub fn check_image_size(path: &Path, width: u64, height: u64) -> Result<()> {
+    match width.checked_mul(height) {
+        Some(pixels) if pixels <= MAX_PIXELS => Ok(()),
+        _ => Err(RenderError::file(
+            path,
+            format!("its header claims {width}x{height} pixels, more than the {MAX_PIXELS} an image may have"),
+        )),
+    }
+}
+
+/// Reads the headers of OpenEXR file `path` and checks, before any pixel
+/// is allocated, that each layer's size is within [`MAX_PIXELS`] and that
+/// the file is long enough for it: its chunk offset table (8 bytes a
+/// chunk) and its pixels (whole when uncompressed, at most
+/// [`MAX_EXR_EXPANSION`] times the file's length when compressed).
+fn check_exr_header(path: &Path) -> Result<()> {
+    let length = std::fs::metadata(path)
+        .map_err(|e| RenderError::io(path, "read OpenEXR", e))?
+        .len();
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| RenderError::io(path, "read OpenEXR header", e))?;
+    for header in &meta.headers {
+        let (width, height) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
+        check_image_size(path, width, height)?;
+        if header.deep {
+            continue; // deep layers are skipped by the reader
+        }
+        let table = header.chunk_count as u64 * 8;
+        let pixel_bytes = header.total_pixel_bytes() as u64;
+        let room = match header.compression {
+            exr::compression::Compression::Uncompressed => length,
+            _ => length.saturating_mul(MAX_EXR_EXPANSION),
+        };
+        if table > length || pixel_bytes > room {
+            return Err(RenderError::file(
+                path,
+                format!(
+                    "its header claims {width}x{height} pixels ({pixel_bytes} bytes in {} chunks), \
+                     more than the file's {length} bytes can hold (truncated or corrupt)",
+                    header.chunk_count
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Opens an image of `path` (`what` it is, for errors) for decoding,
+/// refusing a header larger than [`MAX_PIXELS`] or [`MAX_DECODE_BYTES`].
+fn decode_within_limits(path: &Path, what: &str) -> Result<image::DynamicImage> {
+    let open = |e| RenderError::io(path, &format!("open {what}"), e);
+    let mut reader = image::ImageReader::open(path)
+        .map_err(open)?
+        .with_guessed_format()
+        .map_err(open)?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(MAX_DECODE_BYTES);
+    reader.limits(limits);
+    let decode = |e| RenderError::io(path, &format!("decode {what}"), e);
+    let decoder = reader.into_decoder().map_err(decode)?;
+    let (width, height) = image::ImageDecoder::dimensions(&decoder);
+    check_image_size(path, width as u64, height as u64)?;
+    if image::ImageDecoder::total_bytes(&decoder) > MAX_DECODE_BYTES {
+        return Err(RenderError::file(
+            path,
+            format!("its {width}x{height} pixels need more than the {MAX_DECODE_BYTES} bytes a decoder may take"),
+        ));
+    }
+    image::DynamicImage::from_decoder(decoder).map_err(decode)
+}
+
 /// A linear RGB float image, row-major with row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RgbImage {
@@ -50,6 +137,7 @@ impl RgbImage {
     /// with a single channel (e.g. `Y`) is read as grey. Non-finite values are rejected.
     pub fn read_exr(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
+        check_exr_header(path)?;
         let image = exr::prelude::read()
             .no_deep_data()
             .largest_resolution_level()
@@ -104,14 +192,7 @@ impl RgbImage {
             .extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
             .unwrap_or_default();
-        let decode = || {
-            image::ImageReader::open(path)
-                .map_err(|e| RenderError::io(path, "open image", e))?
-                .with_guessed_format()
-                .map_err(|e| RenderError::io(path, "open image", e))?
-                .decode()
-                .map_err(|e| RenderError::io(path, "decode image", e))
-        };
+        let decode = || decode_within_limits(path, "image");
         let (image, encoding) = match extension.as_str() {
             "exr" => return Ok((Self::read_exr(path)?, PhotoEncoding::Linear)),
             "hdr" => (Self::from_rgb32f(decode()?.into_rgb32f(), |v| v), PhotoEncoding::Linear),
@@ -298,12 +379,7 @@ impl Mask {
     /// where the image has alpha, a pixel must also be opaque (alpha > 127).
     pub fn read_png(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let decoded = image::ImageReader::open(path)
-            .map_err(|e| RenderError::io(path, "open mask", e))?
-            .with_guessed_format()
-            .map_err(|e| RenderError::io(path, "open mask", e))?
-            .decode()
-            .map_err(|e| RenderError::io(path, "decode mask", e))?;
+        let decoded = decode_within_limits(path, "mask")?;
         if decoded.color().bytes_per_pixel() != decoded.color().channel_count() {
             return Err(RenderError::file(
                 path,
@@ -389,6 +465,47 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("temp dir");
         dir
+    }
+
+    /// An OpenEXR file whose data window is rewritten to `(x_max, y_max)`.
+    fn exr_claiming(dir: &Path, name: &str, x_max: i32, y_max: i32) -> std::path::PathBuf {
+        let path = dir.join(name);
+        RgbImage::filled(4, 2, [0.5; 3]).write_exr(&path).expect("write");
+        let mut bytes = std::fs::read(&path).expect("read");
+        let key = b"dataWindow\0box2i\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).expect("a data window") + key.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&x_max.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&y_max.to_le_bytes());
+        std::fs::write(&path, bytes).expect("write");
+        path
+    }
+
+    /// A header that claims more pixels than an image may have, or than
+    /// the file holds, is an error naming the file, before any allocation
+    /// (a claim of 2^40 pixels used to abort the program).
+    #[test]
+    fn exr_headers_claiming_more_than_the_file_holds_are_errors() {
+        let dir = folder("exr-claims");
+        assert_eq!(
+            RgbImage::read_exr(exr_claiming(&dir, "same.exr", 3, 1))
+                .expect("intact")
+                .width,
+            4
+        );
+        for (name, x_max, y_max, rule) in [
+            (
+                "huge.exr",
+                1 << 20,
+                1 << 20,
+                "more than the 268435456 an image may have",
+            ),
+            ("long.exr", 4095, 4095, "more than the file's"),
+        ] {
+            let error = RgbImage::read_exr(exr_claiming(&dir, name, x_max, y_max))
+                .expect_err(name)
+                .to_string();
+            assert!(error.contains(name) && error.contains(rule), "{error}");
+        }
     }
 
     /// Every format a photo may come in, read back as the radiance it encodes.
