@@ -87,7 +87,7 @@ impl Shard {
     /// The whole manifest.
     pub const ALL: Shard = Shard { index: 0, count: 1 };
 
-    fn summary_name(self) -> String {
+    pub fn summary_name(self) -> String {
         format!("summary-{}-of-{}.jsonl", self.index, self.count)
     }
 }

@@ -38,7 +38,7 @@ pub fn check_image_size(path: &Path, width: u64, height: u64) -> Result<()> {
 }
 
 /// Reads the headers of OpenEXR file `path` and checks, before any pixel
-/// is allocated, that each layer's size is within [`MAX_PIXELS`] and that
+/// is allocated, that they keep OpenEXR's rules, that each layer's size is within [`MAX_PIXELS`] and that
 /// the file is long enough for it: its chunk offset table (8 bytes a
 /// chunk) and its pixels (whole when uncompressed, at most
 /// [`MAX_EXR_EXPANSION`] times the file's length when compressed).
@@ -48,12 +48,11 @@ fn check_exr_header(path: &Path) -> Result<()> {
         .len();
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| RenderError::io(path, "read OpenEXR header", e))?;
+    // The header's own rules first (a zero channel sampling divides by zero below).
+    exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| RenderError::io(path, "read OpenEXR header", e))?;
     for header in &meta.headers {
         let (width, height) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
         check_image_size(path, width, height)?;
-        if header.deep {
-            continue; // deep layers are skipped by the reader
-        }
         let table = header.chunk_count as u64 * 8;
         let pixel_bytes = header.total_pixel_bytes() as u64;
         let room = match header.compression {
@@ -69,6 +68,63 @@ fn check_exr_header(path: &Path) -> Result<()> {
                     header.chunk_count
                 ),
             ));
+        }
+    }
+    check_dwa_chunks(path, &meta.headers)
+}
+
+/// Checks the chunks of the DWAA / DWAB layers of OpenEXR file `path`:
+/// each opens with eleven u64 counters (sizes, counts, the AC coder) that
+/// the decoder allocates by unchecked, so each size must fit the chunk
+/// and each count the block's pixels (a corrupt AC count once asked for
+/// 146 GB). A chunk as long as its block's pixels is stored raw.
+fn check_dwa_chunks(path: &Path, headers: &[exr::meta::header::Header]) -> Result<()> {
+    use exr::block::chunk::CompressedBlock;
+    use exr::compression::Compression;
+    let is_dwa = |h: &exr::meta::header::Header| matches!(h.compression, Compression::DWAA(_) | Compression::DWAB(_));
+    if !headers.iter().any(is_dwa) {
+        return Ok(());
+    }
+    let corrupt = |e| RenderError::io(path, "read OpenEXR", e);
+    let file = std::fs::File::open(path).map_err(|e| RenderError::io(path, "read OpenEXR", e))?;
+    let chunks = exr::block::read(std::io::BufReader::new(file), false)
+        .and_then(|reader| reader.all_chunks(false))
+        .map_err(corrupt)?;
+    for chunk in chunks {
+        let chunk = chunk.map_err(corrupt)?;
+        let Some(header) = headers.get(chunk.layer_index).filter(|h| is_dwa(h)) else {
+            continue; // another codec's, or a layer the reader refuses itself
+        };
+        let bytes = match &chunk.compressed_block {
+            CompressedBlock::ScanLine(block) => &block.compressed_pixels_le,
+            CompressedBlock::Tile(block) => &block.compressed_pixels_le,
+            _ => continue,
+        };
+        let block = header
+            .get_block_data_indices(&chunk.compressed_block)
+            .and_then(|tile| header.get_absolute_block_pixel_coordinates(tile))
+            .map_err(corrupt)?;
+        let raw = (block.size.area() * header.channels.bytes_per_pixel) as u64;
+        if bytes.len() as u64 == raw {
+            continue;
+        }
+        // Counters 1, 6-9 are uncompressed sizes and counts; 2-5, compressed sizes.
+        for (index, counter) in bytes.chunks_exact(8).take(10).enumerate().skip(1) {
+            let value = u64::from_le_bytes(counter.try_into().expect("8 bytes"));
+            let limit = if (2..=5).contains(&index) {
+                bytes.len() as u64
+            } else {
+                raw
+            };
+            if value > limit {
+                return Err(RenderError::file(
+                    path,
+                    format!(
+                        "a DWA-compressed chunk's counter {index} claims {value}, more than the {limit} \
+                         its block can hold (truncated or corrupt)"
+                    ),
+                ));
+            }
         }
     }
     Ok(())
@@ -467,45 +523,92 @@ mod tests {
         dir
     }
 
-    /// An OpenEXR file whose data window is rewritten to `(x_max, y_max)`.
-    fn exr_claiming(dir: &Path, name: &str, x_max: i32, y_max: i32) -> std::path::PathBuf {
+    /// An OpenEXR file with the i32s at `(offset, value)` past attribute
+    /// `key`'s value size rewritten.
+    fn exr_patched(dir: &Path, name: &str, key: &[u8], patches: &[(usize, i32)]) -> std::path::PathBuf {
         let path = dir.join(name);
         RgbImage::filled(4, 2, [0.5; 3]).write_exr(&path).expect("write");
         let mut bytes = std::fs::read(&path).expect("read");
-        let key = b"dataWindow\0box2i\0";
-        let at = bytes.windows(key.len()).position(|w| w == key).expect("a data window") + key.len() + 4;
-        bytes[at + 8..at + 12].copy_from_slice(&x_max.to_le_bytes());
-        bytes[at + 12..at + 16].copy_from_slice(&y_max.to_le_bytes());
+        let value_at = bytes.windows(key.len()).position(|w| w == key).expect("the attribute") + key.len() + 4;
+        for &(offset, value) in patches {
+            let at = value_at + offset;
+            bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+        }
         std::fs::write(&path, bytes).expect("write");
         path
     }
 
     /// A header that claims more pixels than an image may have, or than
-    /// the file holds, is an error naming the file, before any allocation
-    /// (a claim of 2^40 pixels used to abort the program).
+    /// the file holds, or that breaks OpenEXR's rules, is an error naming
+    /// the file, before any allocation (a claim of 2^40 pixels used to
+    /// abort the program, a channel sampled every 0 pixels to panic).
     #[test]
     fn exr_headers_claiming_more_than_the_file_holds_are_errors() {
         let dir = folder("exr-claims");
+        let window = b"dataWindow\0box2i\0";
         assert_eq!(
-            RgbImage::read_exr(exr_claiming(&dir, "same.exr", 3, 1))
+            RgbImage::read_exr(exr_patched(&dir, "same.exr", window, &[(8, 3)]))
                 .expect("intact")
                 .width,
             4
         );
-        for (name, x_max, y_max, rule) in [
+        let (x_max, y_max) = (8, 12);
+        for (name, key, patches, rule) in [
             (
                 "huge.exr",
-                1 << 20,
-                1 << 20,
+                &window[..],
+                [(x_max, 1 << 20), (y_max, 1 << 20)],
                 "more than the 268435456 an image may have",
             ),
-            ("long.exr", 4095, 4095, "more than the file's"),
+            (
+                "long.exr",
+                window,
+                [(x_max, 4095), (y_max, 4095)],
+                "more than the file's",
+            ),
+            // The first channel's x sampling: past its name "B\0", type, linearity, reserved.
+            ("sampling.exr", b"channels\0chlist\0", [(10, 0), (10, 0)], "sampling"),
         ] {
-            let error = RgbImage::read_exr(exr_claiming(&dir, name, x_max, y_max))
+            let error = RgbImage::read_exr(exr_patched(&dir, name, key, &patches))
                 .expect_err(name)
                 .to_string();
             assert!(error.contains(name) && error.contains(rule), "{error}");
         }
+    }
+
+    /// A DWAA chunk whose AC count is more than its block holds is an
+    /// error naming the file (the decoder asked for 146 GB on one).
+    #[test]
+    fn dwa_chunks_claiming_more_than_their_block_are_errors() {
+        let dir = folder("dwa");
+        let path = dir.join("dwa.exr");
+        let channels = SpecificChannels::rgb(|exr::math::Vec2(x, y): exr::math::Vec2<usize>| {
+            let v = exr::prelude::f16::from_f32(0.1 + 0.01 * (x * y) as f32);
+            (v, v, v)
+        });
+        let encoding = Encoding {
+            compression: exr::compression::Compression::DWAA(None),
+            blocks: exr::image::Blocks::ScanLines,
+            line_order: exr::meta::attribute::LineOrder::Increasing,
+        };
+        let layer = Layer::new((32, 32), LayerAttributes::default(), encoding, channels);
+        Image::from_layer(layer).write().to_file(&path).expect("write");
+        assert_eq!(RgbImage::read_exr(&path).expect("intact").width, 32);
+        // The offset table's first entry points just past the table: there the
+        // first chunk's line (i32), size (i32), then its counters.
+        let mut bytes = std::fs::read(&path).expect("read");
+        let chunks = exr::meta::MetaData::read_from_file(&path, false)
+            .expect("header")
+            .headers[0]
+            .chunk_count;
+        let table = (0..bytes.len() - 8)
+            .find(|&i| u64::from_le_bytes(bytes[i..i + 8].try_into().expect("8")) == (i + 8 * chunks) as u64)
+            .expect("the offset table");
+        let ac_count = table + 8 * chunks + 8 + 8 * 8;
+        bytes[ac_count..ac_count + 8].copy_from_slice(&(1u64 << 36).to_le_bytes());
+        std::fs::write(&path, bytes).expect("write");
+        let error = RgbImage::read_exr(&path).expect_err("corrupt").to_string();
+        assert!(error.contains("dwa.exr") && error.contains("counter 8"), "{error}");
     }
 
     /// Every format a photo may come in, read back as the radiance it encodes.

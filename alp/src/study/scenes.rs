@@ -146,7 +146,12 @@ impl StudyScene {
         }
         let probe = match crate::probes::PROCEDURAL.contains(&reference) && !dir.join(reference).exists() {
             true => crate::probes::procedural(reference)?,
-            false => crate::probes::load(&dir.join(reference))?,
+            false => crate::probes::load(&dir.join(reference)).map_err(|e| {
+                RenderError::file(
+                    &probe_txt,
+                    format!("names the probe `{reference}`, which does not read: {e}"),
+                )
+            })?,
         };
         let env = EnvMap::read(scene_file(dir, "gt_env.exr")?)?;
         let pose = Pose::read(scene_file(dir, "pose.json")?)?;
@@ -195,5 +200,42 @@ impl StudyScene {
     /// The truth's relit spheres.
     pub fn truth_spheres(&self, settings: &RelightSettings) -> Result<RelitSpheres> {
         relight(&self.env, &self.photo.camera, settings)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{SynthSettings, synthesize, write_scene};
+
+    /// A scene reads whole; one whose `probe.txt` names a probe that does
+    /// not read is an error naming `probe.txt` and the probe.
+    #[test]
+    fn a_scene_reads_and_its_probe_reference_is_checked() {
+        let dir = std::env::temp_dir().join(format!("alp-study-scene-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let probe = crate::probes::procedural("can").expect("a can");
+        let env = EnvMap::constant(8, [1.0; 3]);
+        let settings = SynthSettings {
+            spp: 1,
+            width: 32,
+            height: 24,
+            ..SynthSettings::default()
+        };
+        let scene = synthesize(&probe, &env, &settings).expect("a scene");
+        for (name, reference) in [("named", "can"), ("missing", "no_such_probe")] {
+            write_scene(&dir.join(name), &scene, &env, reference).expect("written");
+        }
+        let read = StudyScene::read(&dir.join("named")).expect("the scene reads");
+        assert_eq!((read.name.as_str(), read.photo.camera.width), ("named", 32));
+        let error = StudyScene::read(&dir.join("missing"))
+            .err()
+            .expect("no probe")
+            .to_string();
+        assert!(
+            error.contains("probe.txt") && error.contains("no_such_probe"),
+            "{error}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
