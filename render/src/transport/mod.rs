@@ -22,6 +22,9 @@ use crate::posed::{PoseVars, PosedMesh, pack_pose};
 use crate::probe::ProbeAsset;
 use crate::{RenderError, Result};
 
+mod op;
+pub use op::TransportOp;
+
 /// One entry of the transport: a texel and the RGB weight with which it
 /// reaches a pixel, in quanta of the pixel's row ([`Transport::new`]).
 /// Eight bytes where a u32 texel and f32 weights took sixteen: a solve
@@ -417,6 +420,19 @@ impl Transport {
                 }
             });
         add_chunk_sums(&scratch.sums, texels, grad);
+    }
+
+    /// `grad += A^T r`: the pixels' RGB `r` (one per pixel) pulled back
+    /// onto the map's texels (texel-major RGB), the transport's adjoint.
+    pub fn pull_back(&self, r: &[[f64; 3]], grad: &mut [f64]) {
+        assert_eq!(r.len(), self.pixels, "Transport::pull_back: one RGB value a pixel");
+        assert_eq!(
+            grad.len(),
+            self.unknowns(),
+            "Transport::pull_back: one gradient a texel channel"
+        );
+        let sums = self.texel_sums(|p, w| std::array::from_fn(|c| w[c] * r[p][c]));
+        grad.iter_mut().zip(sums).for_each(|(g, s)| *g += s);
     }
 
     /// Per texel and channel (texel-major RGB), the sum over the entries
