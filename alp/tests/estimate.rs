@@ -354,7 +354,7 @@ fn the_estimate_is_the_same_at_any_exposure() {
     let (probe, _, photo, mut settings) = scene();
     // A sharp camera: the blur measured on this small render (0.75 px)
     // spreads the pixels, leaves more of the map to the prior, and the
-    // solves' rounding then moves it by 1-2 % (docs/results.md 16).
+    // solves' rounding then moves it by 1-2 % (docs/results/benchmark.md 16).
     settings.photo.blur_px = Some(0.0);
     let exposed = |scale: f32| {
         let mut image = photo.image.clone();

@@ -9,9 +9,10 @@ use alp::Result;
 use alp::objective::testing::{Fixture, check_term};
 use alp::objective::{
     Barycenter, Chamfer, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, RgbVariant, Term, TermContext,
-    Weight, Weighting, luminance,
+    Weight, Weighting,
 };
 use autodiff::{CustomOp, Tape, Var};
+use render::colour::luminance;
 
 /// Built once: every test reads the same scene.
 fn fixture() -> &'static Fixture {

@@ -38,6 +38,7 @@ macro_rules! assert_vec_close {
 pub mod accel;
 pub mod bsdf;
 pub mod camera;
+pub mod colour;
 pub mod envmap;
 pub mod error;
 pub mod exif_camera;

@@ -11,6 +11,7 @@
 //! the bound and the rest solved again.
 
 use rayon::prelude::*;
+use render::colour::LUMINANCE;
 
 use super::observation::{Observations, grid_neighbours, grid_pairs, texel_taps};
 
@@ -327,11 +328,10 @@ impl<'a> AlbedoSystem<'a> {
         let data: f64 = (0..self.obs.pixels.len())
             .map(|p| (0..3).map(|c| residuals[0][p][c] * residuals[1][p][c]).sum::<f64>() * self.weight[p] / 3.0)
             .sum();
-        let luminance = [0.2126, 0.7152, 0.0722];
         let information = self
             .data_diagonal
             .iter()
-            .map(|d| (0..3).map(|c| luminance[c] * d[c] / 2.0).sum::<f64>() * n as f64)
+            .map(|d| (0..3).map(|c| LUMINANCE[c] * d[c] / 2.0).sum::<f64>() * n as f64)
             .collect();
         AlbedoFit {
             smoothness: self.smoothness_of(&x),

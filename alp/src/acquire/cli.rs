@@ -36,7 +36,7 @@ pub struct AcquireArgs {
     /// Texture solve: least-squares (a roughness search, a grooved scan's
     /// turn by the same search, and an exact albedo solve) or adam (Adam on
     /// the re-rendering error: several times slower, and less accurate on
-    /// the capture benchmark's train probes, see docs/results.md 17.4).
+    /// the capture benchmark's train probes, see docs/results/acquisition.md 17.4).
     #[arg(long, default_value = "least-squares")]
     pub solver: String,
     /// on: the pose refined against the views' pixels once the textures are

@@ -33,7 +33,9 @@ use render::sampling::Rng;
 use serde::Serialize;
 
 use super::capture::Capture;
-use super::observation::{Placed, luminance};
+use render::colour::luminance;
+
+use super::observation::Placed;
 use crate::error::{Error, Result};
 
 /// What the texture solve trades.
@@ -411,7 +413,7 @@ pub(crate) fn paired_error<'t>(
     let floor = (relative_floor * view.mean_luminance()) as f32;
     let weight: Vec<f32> = target
         .iter()
-        .map(|t| (luminance(t).max(0.0) + floor).max(1e-12).powi(-2))
+        .map(|t| (luminance(*t).max(0.0) + floor).max(1e-12).powi(-2))
         .collect();
     let weight = tape.constant(&weight);
     let rgb_a = render(tape, placed, scene, v, a);
@@ -675,7 +677,7 @@ fn coverage(problem: &Problem, layout: Layout) -> Vec<f32> {
         let floor = problem.settings.relative_floor * view.mean_luminance();
         for (k, &triangle) in hits.triangle.iter().enumerate() {
             let pixel = hits.pixels[hits.segment[k] as usize] as usize;
-            let target = luminance(&view.target[view.slot[pixel].expect("kept pixels are fitted") as usize]) as f64;
+            let target = luminance(view.target[view.slot[pixel].expect("kept pixels are fitted") as usize]) as f64;
             let signal = target.max(0.0) / (target.max(0.0) + floor).max(f64::MIN_POSITIVE);
             let uv = hit_uv(problem.placed.mesh, &problem.placed.positions, triangle, hits.point[k]);
             let (x, y) = texture(uv);

@@ -22,6 +22,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use render::bsdf::Bsdf;
+use render::colour::luminance;
 use render::image_io::RgbImage;
 use render::integrator::{RenderSettings, render_image};
 use render::mesh::Mesh;
@@ -46,7 +47,7 @@ pub enum Solver {
     Adam,
     /// A roughness search and an exact albedo solve ([`least_squares`]), the
     /// default: several times faster than Adam, and closer on the capture
-    /// benchmark's train probes (docs/results.md 17.4).
+    /// benchmark's train probes (docs/results/acquisition.md 17.4).
     LeastSquares,
 }
 
@@ -65,7 +66,7 @@ pub struct AcquireSettings {
     /// The pose refined against the views' pixels, the textures solved
     /// again at it ([`registration`]); none (every preset's) keeps the
     /// silhouettes' pose: on the Mitsuba captures it has not yet bettered
-    /// the textures (docs/results.md 17).
+    /// the textures (docs/results/acquisition.md 17).
     pub registration: Option<RegistrationSettings>,
     /// Samples per pixel of the report's re-renders (PSNR, preview): their
     /// noise lowers the PSNR a little; each view's re-render costs its time.
@@ -307,11 +308,10 @@ const REPORT_SEED: u64 = 0x5EED;
 /// PSNR of `rerender` against `photo` over the pixels `inside`, the peak
 /// the photo's 99th-percentile luminance there; infinite when equal.
 pub fn psnr_db(photo: &RgbImage, rerender: &RgbImage, inside: &[bool]) -> f64 {
-    let luminance = |p: &[f32; 3]| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64;
     let mut peaks: Vec<f64> = Vec::new();
     let (mut sq, mut n) = (0.0, 0usize);
     for (p, _) in inside.iter().enumerate().filter(|(_, inside)| **inside) {
-        peaks.push(luminance(&photo.pixels[p]));
+        peaks.push(luminance(photo.pixels[p].map(f64::from)));
         for c in 0..3 {
             sq += (photo.pixels[p][c] as f64 - rerender.pixels[p][c] as f64).powi(2);
         }

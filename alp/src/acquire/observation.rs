@@ -31,6 +31,7 @@
 use glam::{Vec2, Vec3};
 use render::bsdf::Bsdf;
 use render::camera::Camera;
+use render::colour::luminance;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 use render::integrator::{
@@ -71,7 +72,7 @@ impl<'a> FitView<'a> {
 
     /// The mean luminance of the pixels fitted.
     pub(crate) fn mean_luminance(&self) -> f64 {
-        self.target.iter().map(|t| luminance(t) as f64).sum::<f64>() / self.target.len().max(1) as f64
+        self.target.iter().map(|&t| luminance(t) as f64).sum::<f64>() / self.target.len().max(1) as f64
     }
 }
 
@@ -93,11 +94,6 @@ pub(crate) fn eroded(inside: &[bool], width: usize) -> Vec<bool> {
                 && inside[p + w]
         })
         .collect()
-}
-
-/// Rec. 709 luminance.
-pub(crate) fn luminance(rgb: &[f32; 3]) -> f32 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
 }
 
 /// The capture with its scan placed: what every observation renders.
@@ -345,7 +341,7 @@ fn observe_view(
                     slope[c] = pass_share * (bright_i - dark_i + bounce[j][c] / count[j] as f32);
                     share[c] = pass_share * (dark_i + bounce_albedo[c] * (bright_i - dark_i));
                 }
-                spread[r as usize][half as usize].add(luminance(&share) as f64);
+                spread[r as usize][half as usize].add(luminance(share) as f64);
                 merge(
                     &mut pixel_hits[r as usize],
                     HitSlope {
@@ -378,7 +374,7 @@ fn observe_view(
     };
     let floor = budget.relative_floor * view.mean_luminance();
     for (p, noise) in out.pixels.iter_mut().zip(noise) {
-        let scale = luminance(&p.target).max(0.0) as f64 + floor;
+        let scale = luminance(p.target).max(0.0) as f64 + floor;
         p.weight =
             1.0 / ((scale * scale + budget.noise_weight * noise).max(f64::MIN_POSITIVE) * (pixels * views) as f64);
     }
@@ -433,7 +429,7 @@ fn pixel_noise(
                 for h in pixel_hits[k].iter().filter(|h| h.half as usize == half) {
                     (0..3).for_each(|c| v[c] += bounce_albedo[c] * h.slope[c]);
                 }
-                luminance(&v) as f64
+                luminance(v) as f64
             };
             let within = (spread[k][0].variance_of_mean(spp) + spread[k][1].variance_of_mean(spp)) / 2.0;
             // Two estimates of one half's value differ by twice its variance, in expectation.

@@ -27,7 +27,9 @@ use render::probe::ProbeAsset;
 use serde::Serialize;
 
 use super::material::{Scene, hit_pair, render};
-use super::observation::{Placed, eroded, luminance};
+use render::colour::luminance;
+
+use super::observation::{Placed, eroded};
 use crate::error::{Error, Result};
 use crate::estimate::Quality;
 
@@ -338,7 +340,7 @@ fn residuals(
                         .enumerate()
                         .map(|(k, &p)| {
                             let t = view.target[view.slot[p as usize].expect("kept pixels are fitted") as usize];
-                            let w = 1.0 / ((luminance(&t).max(0.0) + floor).max(1e-12) * per_pixel);
+                            let w = 1.0 / ((luminance(t).max(0.0) + floor).max(1e-12) * per_pixel);
                             let rgb = |r: &[Vec<f32>; 3], c: usize| w * (r[c][k] - t[c]);
                             (
                                 p,

@@ -13,6 +13,7 @@
 //! a soft photo is explained rather than fought.
 
 use glam::Vec2;
+use render::colour::luminance;
 use render::image_io::Mask;
 use render::silhouette::distance_transform;
 use serde::Serialize;
@@ -20,7 +21,7 @@ use serde::Serialize;
 use super::photo::Photo;
 use super::settings::BlurSettings;
 use crate::error::Result;
-use crate::objective::{luminance, mask_mean_luminance};
+use crate::objective::mask_mean_luminance;
 
 /// Samples of a profile per pixel.
 const STEPS_PER_PX: f32 = 4.0;
@@ -29,7 +30,7 @@ const STEPS_PER_PX: f32 = 4.0;
 /// pixel's box (variance 1/12) sampled between pixel centres by bilinear
 /// interpolation (a tent, variance 1/6) gives 0.5; the probe's own soft
 /// edges add to it. Measured on the train split's sharp photos (their
-/// best widths, docs/results.md).
+/// best widths, docs/results/benchmark.md 16.3).
 pub const SHARP_EDGE_PX: f32 = 0.55;
 
 /// The edge widths fitted (standard deviations, pixels): from the

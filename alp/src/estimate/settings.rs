@@ -1,6 +1,6 @@
 //! Every number the estimate can be told, one struct per stage, and the
 //! quality presets as data. Each field says what it trades; the
-//! measurements behind the values are in `docs/results.md`.
+//! measurements behind the values are in `docs/results/` (index: `docs/results.md`).
 
 use std::sync::Arc;
 

@@ -5,7 +5,7 @@
 //! none). The chromatic total variation of `log(photo / albedo)` over
 //! neighbouring probe pixels measures this without any lighting: the
 //! coarse map that ranks turns by colour bakes a label into its light and
-//! can rank a turn 20 to 150 degrees off first (docs/results.md 12.6).
+//! can rank a turn 20 to 150 degrees off first (docs/results/benchmark.md 12.6).
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;

@@ -247,7 +247,7 @@ pub(super) fn refit_silhouette(
 /// (`hypotheses::on_axis_of`: colour chose it). The fits of the starts stop
 /// short where the outline tells a turn of the axis weakly (a can seen
 /// nearly end on), and a sharp probe's reflections show such an error. It
-/// costs about a start's fit; see docs/results.md, The polish.
+/// costs about a start's fit; see docs/results/decisions.md 6.8, The polish.
 pub(super) fn polish_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings) -> Result<(Pose, PhaseReport)> {
     let progress = ctx.outline.progress..ctx.outline.progress;
     let iters = (settings.outline.iters, PoseSteps::Polish);

@@ -49,7 +49,7 @@ use crate::error::{Error, Result};
 pub use light_smoothness::LightSmoothness;
 pub use mask::{Chamfer, MaskL1};
 pub use pose_prior::{Barycenter, OrientationPrior};
-pub use rgb::{DARK_FRACTION, RgbL1, RgbVariant, luminance, mask_mean_luminance};
+pub use rgb::{DARK_FRACTION, RgbL1, RgbVariant, mask_mean_luminance};
 pub use weight::{DecayShape, Weight};
 
 /// One term of the loss: a scalar recorded on the tape from the context.

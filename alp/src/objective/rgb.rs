@@ -3,16 +3,12 @@
 //! few highlight pixels, so the variants compress the range first.
 
 use autodiff::Var;
+use render::colour::luminance;
 use render::image_io::{Mask, RgbImage};
 use serde::Deserialize;
 
 use super::{Term, TermContext};
 use crate::error::{Error, Result};
-
-/// Luminance of linear Rec. 709 RGB.
-pub fn luminance(rgb: [f64; 3]) -> f64 {
-    0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
-}
 
 /// The photo's mean luminance inside its mask: the `level` of
 /// [`ImageTerms`](super::ImageTerms). Fails when the sizes differ or the

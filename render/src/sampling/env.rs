@@ -27,13 +27,9 @@ use std::f64::consts::PI;
 
 use glam::{Vec2, Vec3};
 
+use crate::colour::luminance;
 use crate::envmap::{EnvMap, direction_to_uv, uv_to_direction};
 use crate::sampling::{Distribution1D, sample_linear};
-
-/// Luminance of linear Rec. 709 RGB.
-fn luminance(rgb: [f32; 3]) -> f64 {
-    0.2126 * rgb[0] as f64 + 0.7152 * rgb[1] as f64 + 0.0722 * rgb[2] as f64
-}
 
 /// A direction drawn from an [`EnvSampler`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,7 +79,7 @@ impl EnvSampler {
             .radiance()
             .iter()
             .enumerate()
-            .map(|(i, &t)| luminance(t) * sin_theta(i / width))
+            .map(|(i, &t)| luminance(t.map(f64::from)) * sin_theta(i / width))
             .collect();
         if knots.iter().all(|&c| c == 0.0) {
             knots = (0..width * height).map(|i| sin_theta(i / width)).collect();

@@ -24,7 +24,7 @@
 //! front triangles sharing an edge give a pixel centred on it 0.75, and the thin foreshortened
 //! triangles crowding along the limb of a curved object lift the coverage on the silhouette
 //! above one half, and mask fits shrink the probe; with the distance to the edge the coverage
-//! is one half on it and they do not (see docs/results.md, Silhouette losses).
+//! is one half on it and they do not (see docs/results/decisions.md 6.4, Silhouette losses).
 //!
 //! ```no_run
 //! use autodiff::Tape;

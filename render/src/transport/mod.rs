@@ -30,7 +30,7 @@ pub use op::TransportOp;
 /// Eight bytes where a u32 texel and f32 weights took sixteen: a solve
 /// streams the whole transport at each of its hundreds of evaluations, so
 /// its time goes with the transport's bytes (and a small probe's transport
-/// can stay in the last-level cache). See docs/results.md, Lighting solve.
+/// can stay in the last-level cache). See docs/results/decisions.md 5, Lighting solve.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(8))]
 pub(crate) struct Entry {
@@ -466,9 +466,8 @@ impl Transport {
     /// its weights), normalised to a maximum of 1: the paper's sampling
     /// frequency, our confidence map.
     pub fn confidence(&self) -> Vec<f32> {
-        let luminance = |w: [f64; 3]| 0.2126 * w[0] + 0.7152 * w[1] + 0.0722 * w[2];
         let freq: Vec<f64> = self
-            .texel_sums(|_, w| [luminance(w), 0.0, 0.0])
+            .texel_sums(|_, w| [crate::colour::luminance(w), 0.0, 0.0])
             .into_iter()
             .step_by(3)
             .collect();

@@ -7,6 +7,7 @@ use optim::schedule::Decay;
 use optim::{Adam, Bounds, Lbfgs, ParamGroup, Solver, Termination};
 use serde::Serialize;
 
+use render::colour::luminance;
 use render::transport::{PullBackScratch, Transport};
 
 use crate::error::{Error, Result};
@@ -205,10 +206,7 @@ pub fn solve(transport: &Transport, data: &DataTerm, settings: LightingSolve, x0
     let lambda = settings.smoothness.weight / mean_sq / (w * h) as f64;
     // Differences may count relative to the local radiance level of the
     // start (a bright light's edge is no rougher than a dark wall's texture).
-    let level: Vec<f64> = x0
-        .chunks_exact(3)
-        .map(|t| 0.2126 * t[0] + 0.7152 * t[1] + 0.0722 * t[2])
-        .collect();
+    let level: Vec<f64> = x0.chunks_exact(3).map(|t| luminance([t[0], t[1], t[2]])).collect();
     let mean_level = level.iter().sum::<f64>() / level.len() as f64;
     let floor = DARK_LEVEL * mean_level;
     let relative = |i: usize, j: usize| -> f64 {

@@ -12,6 +12,7 @@ pub mod least_squares;
 use std::time::Instant;
 
 use optim::Termination;
+use render::colour::luminance;
 use render::envmap::{EnvMap, resample};
 use render::image_io::RgbImage;
 use render::integrator::{LightSampling, PrimaryHits, RenderSettings};
@@ -27,7 +28,7 @@ use super::photo::{Photo, Pixels, on_probe};
 use super::report::{PhaseReport, resident_mb};
 use super::settings::{LightingSettings, Settings};
 use crate::error::{Error, Result};
-use crate::objective::{DARK_FRACTION, luminance, mask_mean_luminance};
+use crate::objective::{DARK_FRACTION, mask_mean_luminance};
 
 /// What a lighting fit is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,7 +43,7 @@ pub(super) enum LightingPurpose {
     /// diffuse and shiny objects: purely relative weights let a bright
     /// light's energy go), and smoothness relative to the local radiance
     /// level. Where the weights turn absolute trades the mirror against the
-    /// other spheres; see docs/results.md, Lighting solve.
+    /// other spheres; see docs/results/decisions.md 5, Lighting solve.
     Output,
 }
 
@@ -425,7 +426,7 @@ pub(super) fn albedo_edges(
 /// more). The output map's data term weighs each pixel by the
 /// square of the share the model follows to the env map (`followed`):
 /// light that stops on the probe is left out, and such samples carry no
-/// signal either, only noise. See docs/results.md, Lighting solve.
+/// signal either, only noise. See docs/results/decisions.md 5, Lighting solve.
 pub(super) struct LitShares {
     /// Of the pixel's direct samples, the share that reaches the map.
     pub(super) direct: Vec<f64>,
@@ -525,7 +526,7 @@ pub(super) fn output_map(texels: &[f64], work: (usize, usize), out: (usize, usiz
 /// doubles on reflection: texels alpha wide), as a power of two in
 /// 16..=128 (a can, r = 0.2, gets 64 rows; a probe sharper than r = 0.186,
 /// 128). Finer texels than the lobe resolves only add unknowns the data
-/// cannot tell apart; see docs/results.md, Working resolution.
+/// cannot tell apart; see docs/results/decisions.md 5.7, Working resolution.
 pub fn working_height(min_roughness: f32) -> usize {
     let alpha = (min_roughness * min_roughness).max(0.02);
     let rows = std::f32::consts::PI / alpha;
