@@ -25,8 +25,8 @@ use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 use super::capture::Capture;
 use crate::error::{Error, Result};
 use crate::estimate::Settings;
+use crate::estimate::pose::silhouette::{PoseSteps, pose_adam};
 use crate::estimate::settings::OutlineSettings;
-use crate::estimate::silhouette::{PoseSteps, pose_adam};
 use crate::estimate::symmetry;
 
 /// What the placement trades.

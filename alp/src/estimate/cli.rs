@@ -13,9 +13,9 @@ use render::pose::Pose;
 
 use crate::error::{Error, Result};
 
-use super::lighting::LightingMethod;
 use super::probe_box::{ProbeBox, mask_in_box};
 use super::settings::ADAM_LIGHTING;
+use super::settings::LightingMethod;
 use super::{Estimate, Photo, Quality, Settings, estimate_with};
 use crate::objective::Objective;
 

@@ -4,13 +4,14 @@
 //! 1. [`photo`]: the photo, its mask and camera; clipped pixels; the working
 //!    image (box-filtered when the mask is large).
 //! 2. [`symmetry`]: the probe's axis and whether a turn about it shows.
-//! 3. [`orientation`]: axis hypotheses from the mask ([`hypotheses`]), each
-//!    fitted to the outline ([`silhouette`]); the kept axes' turns ranked by
-//!    colour ([`ranking`]).
+//! 3. [`pose::orientation`]: axis hypotheses from the mask
+//!    ([`pose::hypotheses`]), each fitted to the outline
+//!    ([`pose::silhouette`]); the kept axes' turns ranked by colour
+//!    ([`pose::ranking`]).
 //! 4. [`lighting`]: at a fixed pose the image is linear in the env map; the
 //!    map is a bounded least-squares solve over the recorded transport. A
 //!    pilot map guides the later solves' samples.
-//! 5. [`pose_search`]: the photo judges what the outline cannot tell: the
+//! 5. [`pose::judgement`]: the photo judges what the outline cannot tell: the
 //!    size, the lean towards the view ray, the chosen pose against its
 //!    rivals, a small probe's refinement.
 //! 6. The final map at more samples, guided by the kept pose's map; the
@@ -21,17 +22,13 @@
 
 pub mod blur;
 pub mod cli;
-pub mod hypotheses;
 pub mod lighting;
-pub mod orientation;
 pub mod photo;
-pub mod pose_search;
+pub mod pose;
+pub mod probe;
 pub mod probe_box;
-pub mod ranking;
 pub mod report;
 pub mod settings;
-pub mod shading;
-pub mod silhouette;
 pub mod symmetry;
 
 use std::time::Instant;
@@ -39,65 +36,23 @@ use std::time::Instant;
 use glam::Vec3;
 use render::bsdf::{Bsdf, GgxMetal};
 use render::integrator::{RenderSettings, coverage_mask, render_image};
-use render::mesh::EdgeAdjacency;
 use render::probe::ProbeAsset;
 use render::silhouette::ReferenceMask;
 
 pub use lighting::working_height;
 pub use photo::{Photo, WorkingPhoto, mask_on_border, working_factor};
+pub use probe::ProbeBsdf;
 pub use report::{Estimate, PhaseReport, Report};
 pub use settings::{Quality, Settings};
 
-use settings::SymmetrySettings;
+use probe::Probe;
 
 use lighting::{MapSizes, env_from_texels, final_fit, lighting_report};
-use orientation::{PoseSearch, search_pose};
-use pose_search::PhotoJudge;
+use pose::judgement::PhotoJudge;
+use pose::orientation::{PoseSearch, search_pose};
 use report::{PhaseLog, WorkingImage};
 
 use crate::error::{Error, Result};
-
-/// A reflectance model at both precisions the estimate works in: renders
-/// in f32, outline fits in f64. Every [`Bsdf`] written generically over
-/// [`autodiff::Real`] (as `render::bsdf`'s are) is one.
-pub trait ProbeBsdf: Bsdf<f32> + Bsdf<f64> {}
-
-impl<B: Bsdf<f32> + Bsdf<f64>> ProbeBsdf for B {}
-
-/// The probe's mesh, material and topology, prepared once.
-pub(super) struct Probe<'a> {
-    pub(super) asset: &'a ProbeAsset,
-    /// Its reflectance model: what every render of it uses.
-    pub(super) bsdf: &'a dyn ProbeBsdf,
-    pub(super) edges: EdgeAdjacency,
-    /// Whether a turn about its axis changes its outline (`symmetry::turns_show`):
-    /// each axis hypothesis is then fitted at several turns.
-    pub(super) turns_show: bool,
-    /// Whether it looks the same at every turn about its axis, where the
-    /// asset tells (`symmetry::looks_alike_turned`; else its renders do).
-    pub(super) alike_turned: Option<bool>,
-    /// Whether its colours are the same all round its axis, where the asset
-    /// tells (`symmetry::colours_alike_turned`): then colour cannot tell its
-    /// ends apart, and the photo judges the other end.
-    pub(super) colours_alike: Option<bool>,
-}
-
-impl<'a> Probe<'a> {
-    /// `asset` (its axis along mesh +Y) of reflectance `bsdf`, prepared.
-    pub(super) fn new(asset: &'a ProbeAsset, bsdf: &'a dyn ProbeBsdf, symmetry: &SymmetrySettings) -> Self {
-        // The axis of revolution, found once for the three readings of it.
-        let revolution = symmetry::axis_of_revolution(&asset.mesh, symmetry);
-        let revolution = revolution.as_ref();
-        Probe {
-            asset,
-            bsdf,
-            edges: EdgeAdjacency::new(&asset.mesh),
-            turns_show: symmetry::turns_show_about(&asset.mesh, revolution, symmetry),
-            alike_turned: symmetry::alike_turned_about(asset, revolution, symmetry),
-            colours_alike: symmetry::colours_alike_about(asset, revolution, symmetry),
-        }
-    }
-}
 
 /// Estimates the pose and the lighting from `photo` of `probe`, a metal of
 /// the paper's reflectance model ([`GgxMetal`]).

@@ -78,7 +78,7 @@ pub struct Report {
     pub probe_axis: [f32; 3],
     /// Mask pixels on the photo's border: the probe may go on beyond it
     /// (the start and the axis hypotheses allow for that:
-    /// [`initial_pose`](super::hypotheses::initial_pose), [`axis_hypotheses`](super::hypotheses::axis_hypotheses)), and what lies
+    /// [`initial_pose`](super::pose::hypotheses::initial_pose), [`axis_hypotheses`](super::pose::hypotheses::axis_hypotheses)), and what lies
     /// beyond is unseen.
     pub mask_on_border_pixels: usize,
     /// The photo as the estimate worked on it.

@@ -83,7 +83,7 @@ pub struct TermContext<'a, 't> {
     pub image: Option<ImageTerms<'a, 't>>,
     /// The env map on the tape, when the phase optimises it.
     pub env: Option<&'a ImageVars<'t, f64>>,
-    /// The canonical front-facing orientation (`estimate::hypotheses::front_facing`).
+    /// The canonical front-facing orientation (`estimate::pose::hypotheses::front_facing`).
     pub front_facing: Quat,
     /// The fraction of the run done, in [0, 1]: what weight schedules follow.
     pub progress: f64,

@@ -28,7 +28,7 @@ use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 use crate::error::{Error, Result};
 
 use super::{ImageTerms, Term, TermContext, mask_mean_luminance};
-use crate::estimate::hypotheses::front_facing;
+use crate::estimate::pose::hypotheses::front_facing;
 
 /// The largest relative gradient error [`TermCheck::passes`] accepts.
 pub const TOLERANCE: f64 = 1e-6;

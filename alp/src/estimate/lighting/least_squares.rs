@@ -5,12 +5,12 @@
 
 use optim::schedule::Decay;
 use optim::{Adam, Bounds, Lbfgs, ParamGroup, Solver, Termination};
-use serde::Serialize;
 
 use render::colour::luminance;
 use render::transport::{PullBackScratch, Transport};
 
 use crate::error::{Error, Result};
+use crate::estimate::settings::{LightingMethod, Smoothness};
 
 /// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
 /// doubling from `coarsest` (or `size` itself when not larger).
@@ -71,56 +71,6 @@ impl DataTerm {
     }
 }
 
-/// The smoothness prior of a lighting solve: neighbouring texels'
-/// differences, penalised quadratically up to `edge` and linearly beyond.
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct Smoothness {
-    /// Weight of the term (relative to the data term, scale-free).
-    pub weight: f64,
-    /// The RMS difference of two neighbours over the channels, as a
-    /// fraction of the level it is measured against, past which the
-    /// penalty grows linearly (a vectorial Charbonnier penalty: an edge
-    /// costs in proportion to its height, not its square, so a light's
-    /// edge stays sharp, and its three channels share one cost, so they
-    /// keep their edge in one place instead of fringing in colour).
-    /// 0: quadratic at every difference.
-    pub edge: f64,
-    /// The weight of a difference's chromatic part (its channels'
-    /// departure from their mean) against its grey part: above 1, colour
-    /// varies more slowly over the map than brightness, as in real scenes,
-    /// so a direction whose colour the photo hardly shows (seen through a
-    /// red label, its green and blue dim) takes its neighbours' colour
-    /// instead of fitting noise. 1: the channels apart.
-    pub chroma: f64,
-    /// How much the photo must tell of two texels for an edge between
-    /// them to stay sharp: a pair's edge grows by `1 + edge_evidence / r`
-    /// in square, `r` the lesser of its texels' data curvature over their
-    /// prior curvature. Where the photo tells little (a direction seen
-    /// through a rough or dark region, or by a few pixels), the penalty
-    /// stays quadratic and the map smooth, instead of keeping the steps
-    /// and single bright texels that noise drew there. 0: one edge
-    /// everywhere.
-    pub edge_evidence: f64,
-}
-
-impl Smoothness {
-    /// Quadratic smoothness of `weight`, the channels apart.
-    pub fn quadratic(weight: f64) -> Self {
-        Smoothness {
-            weight,
-            edge: 0.0,
-            chroma: 1.0,
-            edge_evidence: 0.0,
-        }
-    }
-
-    /// The curvature of a neighbour pair's penalty in one channel of one
-    /// texel, per unit of `lambda area q`, at small differences.
-    fn channel_curvature(&self) -> f64 {
-        (2.0 + 4.0 * self.chroma) / 3.0
-    }
-}
-
 /// Settings of the lighting solve.
 #[derive(Clone, Copy, Debug)]
 pub struct LightingSolve {
@@ -140,27 +90,6 @@ pub struct LightingSolve {
     pub max_iters: usize,
     /// How the objective is minimised.
     pub method: LightingMethod,
-}
-
-/// How a lighting solve minimises its objective.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LightingMethod {
-    /// Bounded L-BFGS on the Jacobi-preconditioned problem: the exact
-    /// solve, in a few hundred evaluations.
-    LeastSquares,
-    /// The paper's recipe (PAPER.md, the official code): Adam steps on the
-    /// texels themselves, `steps_per_iteration` for each L-BFGS iteration
-    /// the solve would have had, at `rate` times the start's mean level,
-    /// decaying as the official code's `10^(-0.0002 t)`. A step moves a
-    /// texel by about the rate whatever its brightness, so a light far
-    /// above the mean takes many steps to reach.
-    Adam {
-        /// Adam steps per L-BFGS iteration of the same solve.
-        steps_per_iteration: usize,
-        /// The learning rate over the start's mean level.
-        rate: f64,
-    },
 }
 
 /// The official code's learning-rate decay per Adam step, `10^(-0.0002)`.

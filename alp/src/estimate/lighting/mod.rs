@@ -20,13 +20,13 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
-pub use least_squares::{DataTerm, LightingMethod, LightingSolve, Smoothness, Solved, pyramid, solve};
+pub use least_squares::{DataTerm, LightingSolve, Solved, pyramid, solve};
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
 
 use super::Probe;
 use super::photo::{Photo, Pixels, on_probe};
 use super::report::{PhaseReport, resident_mb};
-use super::settings::{LightingSettings, Settings};
+use super::settings::{LightingSettings, Settings, Smoothness};
 use crate::error::{Error, Result};
 use crate::objective::{DARK_FRACTION, mask_mean_luminance};
 

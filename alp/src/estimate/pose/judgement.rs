@@ -14,14 +14,15 @@ use render::mesh::Mesh;
 use render::pose::Pose;
 use render::sampling::EnvSampler;
 
-use super::lighting::{
-    FitRequest, LightingFit, LightingPurpose, Smoothness, env_from_texels, fit_lighting, lighting_report,
-};
-use super::photo::{Photo, Pixels};
-use super::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
-use super::settings::Settings;
-use super::{Probe, hypotheses};
+use super::hypotheses;
 use crate::error::Result;
+use crate::estimate::Probe;
+use crate::estimate::lighting::{
+    FitRequest, LightingFit, LightingPurpose, env_from_texels, fit_lighting, lighting_report,
+};
+use crate::estimate::photo::{Photo, Pixels};
+use crate::estimate::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
+use crate::estimate::settings::{Settings, Smoothness};
 
 /// The lean (degrees) that maximises `score` within `reach` either way,
 /// by a line search: leans of 0 and of `step` either way; while one side
@@ -29,7 +30,7 @@ use crate::error::Result;
 /// the best lean tried and its neighbours, where it is a maximum. A lean
 /// that cannot be scored scores minus infinity. Returns every (lean,
 /// score) tried, in order.
-pub(super) fn line_search_max(
+pub(in crate::estimate) fn line_search_max(
     step: f32,
     reach: f32,
     mut score: impl FnMut(f32) -> Result<f64>,
@@ -73,15 +74,15 @@ pub(super) fn line_search_max(
 type ScoredRival = Result<((f64, Vec<f64>), Vec<f64>)>;
 
 /// What the photo's judgement of the searched pose found.
-pub(super) struct Judged {
+pub(in crate::estimate) struct Judged {
     /// The pose kept.
-    pub(super) pose: Pose,
+    pub(in crate::estimate) pose: Pose,
     /// Its pilot map at the search resolution (None without a pilot).
-    pub(super) pilot: Option<Vec<f64>>,
-    pub(super) rival: Option<RivalReport>,
-    pub(super) size: Option<LineSearchReport>,
-    pub(super) lean: Option<LineSearchReport>,
-    pub(super) refinement: Vec<RefinementStep>,
+    pub(in crate::estimate) pilot: Option<Vec<f64>>,
+    pub(in crate::estimate) rival: Option<RivalReport>,
+    pub(in crate::estimate) size: Option<LineSearchReport>,
+    pub(in crate::estimate) lean: Option<LineSearchReport>,
+    pub(in crate::estimate) refinement: Vec<RefinementStep>,
 }
 
 /// The pose kept so far: its pilot map (solved at `piloted`, which the
@@ -95,7 +96,7 @@ struct Kept {
 
 /// What [`PhotoJudge::refine`] searches.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) enum Moves {
+pub(in crate::estimate) enum Moves {
     /// The lean and the sway, and a `patterned` probe's turn, in rounds.
     All { patterned: bool },
     /// The turn alone, once.
@@ -103,15 +104,15 @@ pub(super) enum Moves {
 }
 
 /// Judges poses by the photo: what every photo-scored search shares.
-pub(super) struct PhotoJudge<'a> {
-    pub(super) probe: &'a Probe<'a>,
-    pub(super) photo: &'a Photo,
-    pub(super) clipped: &'a [bool],
+pub(in crate::estimate) struct PhotoJudge<'a> {
+    pub(in crate::estimate) probe: &'a Probe<'a>,
+    pub(in crate::estimate) photo: &'a Photo,
+    pub(in crate::estimate) clipped: &'a [bool],
     /// The searches' map size.
-    pub(super) work: (usize, usize),
-    pub(super) settings: &'a Settings,
+    pub(in crate::estimate) work: (usize, usize),
+    pub(in crate::estimate) settings: &'a Settings,
     /// Whether the pose was searched (a known pose is only piloted).
-    pub(super) searched: bool,
+    pub(in crate::estimate) searched: bool,
 }
 
 impl PhotoJudge<'_> {
@@ -120,7 +121,7 @@ impl PhotoJudge<'_> {
     /// whose rivals grow with it); the rival test; for a small probe the
     /// refinement, else the lean line search. Nothing but the pose when
     /// there is no pilot (`Settings::spp_pilot` 0).
-    pub(super) fn judge(
+    pub(in crate::estimate) fn judge(
         &self,
         phases: &mut PhaseLog,
         pose: Pose,
@@ -372,7 +373,7 @@ impl PhotoJudge<'_> {
     /// keeps), and its data term's weighted error in -dB (higher is better;
     /// minus infinity with no data pixel left): the weighted error, not the
     /// PSNR, which a sun's highlight dominates.
-    pub(super) fn score(&self, pose: &Pose, start: &[f64], pixels: Pixels) -> Result<(LightingFit, f64)> {
+    pub(in crate::estimate) fn score(&self, pose: &Pose, start: &[f64], pixels: Pixels) -> Result<(LightingFit, f64)> {
         let (lighting, work) = (&self.settings.lighting, self.work);
         let sampler = EnvSampler::new(&env_from_texels(start, work.0, work.1)?);
         let sampling = lighting.model.sampling(Some(&sampler));
@@ -466,7 +467,7 @@ impl PhotoJudge<'_> {
     /// steps both score lower stops. Returns the pose, its score and map;
     /// each search goes to `steps`.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn refine(
+    pub(in crate::estimate) fn refine(
         &self,
         start: &[f64],
         phases: &mut PhaseLog,
@@ -526,7 +527,7 @@ impl PhotoJudge<'_> {
 
 /// Whether the photo refines the pose search's choice and rivals
 /// (`Settings::photo_refine_px`; a lean search to refine by).
-pub(super) fn photo_refines(photo: &Photo, settings: &Settings) -> bool {
+pub(in crate::estimate) fn photo_refines(photo: &Photo, settings: &Settings) -> bool {
     settings.pose_search.lean_step_deg > 0.0 && photo.mask.count() <= settings.pose_search.photo_refine_px
 }
 

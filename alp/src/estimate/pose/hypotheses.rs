@@ -13,8 +13,8 @@ use render::image_io::Mask;
 use render::mesh::Mesh;
 use render::pose::Pose;
 
-use super::settings::HypothesisSettings;
 use crate::error::{Error, Result};
+use crate::estimate::settings::HypothesisSettings;
 
 /// The canonical front-facing orientation for `camera`: the probe standing
 /// upright in the world (mesh +Y along the camera's `up`, which FORMATS.md
@@ -322,7 +322,7 @@ pub fn outline_twins(pose: &Pose, mesh: &Mesh, camera: &Camera, h: &HypothesisSe
 /// The probe's axis, the view ray to the centre of its bounding box, and
 /// `axis x view`, about which a positive angle leans the axis towards the
 /// view ray (any axis square to the probe's, for an axis along the ray).
-pub(super) fn lean_frame(pose: &Pose, mesh: &Mesh, camera: &Camera) -> (Vec3, Vec3, Vec3) {
+pub(in crate::estimate) fn lean_frame(pose: &Pose, mesh: &Mesh, camera: &Camera) -> (Vec3, Vec3, Vec3) {
     let view = (box_centre(pose, mesh) - camera.origin).normalize();
     let axis = (pose.rotation * Vec3::Y).normalize();
     (axis, view, axis.cross(view).normalize_or(axis.any_orthonormal_vector()))
@@ -365,7 +365,7 @@ pub fn on_axis_of(pose: &Pose, fitted: &Pose, mesh: &Mesh) -> Pose {
 
 /// `pose` with the orientation `rotation`, the centre of the probe's
 /// bounding box kept in place.
-pub(super) fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
+pub(in crate::estimate) fn rotated(pose: &Pose, mesh: &Mesh, rotation: Quat) -> Pose {
     centred(pose, mesh, rotation.normalize(), pose.scale)
 }
 
@@ -389,19 +389,19 @@ pub fn at_own_size(pose: &Pose, mesh: &Mesh, camera: &Camera) -> Pose {
 
 /// The pose of `rotation` and `scale` that keeps the centre of the
 /// probe's bounding box where `pose` has it.
-pub(super) fn centred(pose: &Pose, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
+pub(in crate::estimate) fn centred(pose: &Pose, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
     placed(box_centre(pose, mesh), mesh, rotation, scale)
 }
 
 /// Where `pose` puts the centre of the probe's bounding box.
-pub(super) fn box_centre(pose: &Pose, mesh: &Mesh) -> Vec3 {
+pub(in crate::estimate) fn box_centre(pose: &Pose, mesh: &Mesh) -> Vec3 {
     let (lo, hi) = mesh.bounds();
     pose.transform_point(0.5 * (lo + hi))
 }
 
 /// The pose of `rotation` and `scale` that puts the centre of the probe's
 /// bounding box at `centre`.
-pub(super) fn placed(centre: Vec3, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
+pub(in crate::estimate) fn placed(centre: Vec3, mesh: &Mesh, rotation: Quat, scale: f32) -> Pose {
     let (lo, hi) = mesh.bounds();
     Pose::new(rotation, scale, centre - rotation * (scale * 0.5 * (lo + hi)))
 }

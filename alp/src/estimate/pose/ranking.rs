@@ -7,12 +7,12 @@
 use glam::Vec3;
 use render::pose::Pose;
 
-use super::report::StartReport;
-use super::settings::OrientationSettings;
+use crate::estimate::report::StartReport;
+use crate::estimate::settings::OrientationSettings;
 
 /// Whether start `a` ranks above start `b`: the smaller colour error, or
 /// on a tie the smaller relative error.
-pub(super) fn ranks_above(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
+pub(in crate::estimate) fn ranks_above(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
     if (a.rgb_angle_deg - b.rgb_angle_deg).abs() > o.rank_tie_deg {
         a.rgb_angle_deg < b.rgb_angle_deg
     } else {
@@ -23,7 +23,7 @@ pub(super) fn ranks_above(a: &StartReport, b: &StartReport, o: &OrientationSetti
 /// Whether two starts rendered alike: colours that tie (between two turns of
 /// a probe of one colour only its facets move the angle, by a small fraction
 /// of itself) and relative errors the same to `OrientationSettings::same_render`.
-pub(super) fn renders_alike(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
+pub(in crate::estimate) fn renders_alike(a: &StartReport, b: &StartReport, o: &OrientationSettings) -> bool {
     (a.rgb_angle_deg - b.rgb_angle_deg).abs() <= o.rank_tie_deg
         && (a.relative_error - b.relative_error).abs() <= o.same_render * a.relative_error.max(b.relative_error)
 }
@@ -32,7 +32,7 @@ pub(super) fn renders_alike(a: &StartReport, b: &StartReport, o: &OrientationSet
 /// data pixels: the probe's colour pattern (a label) in the right place or
 /// not, whatever detail of the lighting a coarse map leaves unexplained
 /// (which moves intensity far more than hue).
-pub(super) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[[f64; 3]]) -> f64 {
+pub(in crate::estimate) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], weight: &[[f64; 3]]) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
     for ((r, t), w) in rendered.iter().zip(target).zip(weight) {
         if w.iter().any(|&w| w > 0.0) {
@@ -53,7 +53,7 @@ pub(super) fn mean_rgb_angle_deg(rendered: &[[f64; 3]], target: &[[f64; 3]], wei
 /// shows its turn in the outline, which a coarse map's colours can
 /// contradict (its true turn's outline can fit several times better than
 /// the turn colour ranks first).
-pub(super) fn best_ranked(
+pub(in crate::estimate) fn best_ranked(
     starts: &[StartReport],
     among: impl IntoIterator<Item = usize>,
     symmetric: bool,
@@ -85,7 +85,7 @@ pub(super) fn best_ranked(
 /// mask a pixel off turns how a probe's starts rank (a half turn of the
 /// wrong end can rank above the right end, which the photo then scores
 /// higher), and a small probe's end and half turn can both rank close.
-pub(super) fn rival_starts(
+pub(in crate::estimate) fn rival_starts(
     starts: &[StartReport],
     candidates: &[Pose],
     chosen: usize,

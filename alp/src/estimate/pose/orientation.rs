@@ -16,40 +16,41 @@ use render::integrator::{LightSampling, RenderSettings};
 use render::pose::Pose;
 use render::silhouette::ReferenceMask;
 
-use super::lighting::{
-    FitRequest, LightingFit, LightingPurpose, Smoothness, env_from_texels, fit_lighting, lighting_report,
-};
-use super::photo::{Photo, Pixels};
+use super::hypotheses;
 use super::ranking::{best_ranked, mean_rgb_angle_deg, renders_alike, rival_starts};
-use super::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
-use super::settings::{OrientationSettings, Settings};
 use super::shading::LabelVariation;
 use super::silhouette::{
     PoseContext, PoseSteps, fit_pose_to_image, fit_silhouette, polish_silhouette, refit_silhouette, silhouette_loss,
 };
-use super::{Probe, hypotheses};
 use crate::error::{Error, Result};
+use crate::estimate::Probe;
+use crate::estimate::lighting::{
+    FitRequest, LightingFit, LightingPurpose, env_from_texels, fit_lighting, lighting_report,
+};
+use crate::estimate::photo::{Photo, Pixels};
+use crate::estimate::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
+use crate::estimate::settings::{OrientationSettings, Settings, Smoothness};
 use crate::objective::mask_mean_luminance;
 
 /// What the pose search found: the pose, every axis hypothesis's and
 /// start's account and the index of the start kept.
-pub(super) struct PoseSearch {
-    pub(super) pose: Pose,
+pub(in crate::estimate) struct PoseSearch {
+    pub(in crate::estimate) pose: Pose,
     /// The chosen pose's rivals, which the photo judges: for a probe
     /// symmetric about its axis, the other end's best outline fit, if it
     /// fits within `OrientationSettings::rival_end_ratio`; for one with a pattern, see
     /// [`rival_starts`].
-    pub(super) rivals: Vec<Pose>,
-    pub(super) axes: Vec<AxisReport>,
-    pub(super) starts: Vec<StartReport>,
-    pub(super) chosen: usize,
+    pub(in crate::estimate) rivals: Vec<Pose>,
+    pub(in crate::estimate) axes: Vec<AxisReport>,
+    pub(in crate::estimate) starts: Vec<StartReport>,
+    pub(in crate::estimate) chosen: usize,
     /// Whether the probe rendered alike turned about its axis (no pattern).
-    pub(super) symmetric: bool,
+    pub(in crate::estimate) symmetric: bool,
 }
 
 impl PoseSearch {
     /// The accounts the report keeps: every axis, every start, the one chosen.
-    pub(super) fn into_accounts(self) -> (Vec<AxisReport>, Vec<StartReport>, Option<usize>) {
+    pub(in crate::estimate) fn into_accounts(self) -> (Vec<AxisReport>, Vec<StartReport>, Option<usize>) {
         (self.axes, self.starts, Some(self.chosen))
     }
 }
@@ -61,7 +62,7 @@ type RankedStart = (Option<PhaseReport>, PhaseReport, StartReport, Pose);
 /// silhouette, their turns ranked by re-rendering colour error, the chosen
 /// pose and its rivals polished; on request, joint rounds of pose and
 /// lighting from the chosen pose.
-pub(super) fn search_pose(
+pub(in crate::estimate) fn search_pose(
     probe: &Probe,
     photo: &Photo,
     reference: &ReferenceMask,

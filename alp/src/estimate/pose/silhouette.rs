@@ -19,33 +19,34 @@ use render::pose::Pose;
 use render::posed::{POSE_PARAMS, PoseVars, PosedMesh, pack_pose, unpack_pose};
 use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 
-use super::photo::{Photo, usable_pixel};
-use super::report::{PhaseReport, PoseRecord, resident_mb};
-use super::settings::{OutlineSettings, Settings};
-use super::{Probe, hypotheses};
+use super::hypotheses;
 use crate::error::{Error, Result};
+use crate::estimate::Probe;
+use crate::estimate::photo::{Photo, usable_pixel};
+use crate::estimate::report::{PhaseReport, PoseRecord, resident_mb};
+use crate::estimate::settings::{OutlineSettings, Settings};
 use crate::objective::{Evaluation, ImageTerms, Objective, TermContext, TermReport};
 
 /// What one evaluation of the objective during a pose phase sees besides
 /// the pose: the photo, its prepared mask and the phase's progress.
 #[derive(Clone, Copy)]
-pub(super) struct PoseContext<'a> {
-    pub(super) probe: &'a Probe<'a>,
-    pub(super) photo: &'a Photo,
-    pub(super) reference: &'a ReferenceMask,
-    pub(super) objective: &'a Objective,
-    pub(super) front_facing: Quat,
+pub(in crate::estimate) struct PoseContext<'a> {
+    pub(in crate::estimate) probe: &'a Probe<'a>,
+    pub(in crate::estimate) photo: &'a Photo,
+    pub(in crate::estimate) reference: &'a ReferenceMask,
+    pub(in crate::estimate) objective: &'a Objective,
+    pub(in crate::estimate) front_facing: Quat,
     /// Pixels excluded as clipped.
-    pub(super) clipped: &'a [bool],
+    pub(in crate::estimate) clipped: &'a [bool],
     /// The photo's mean luminance in the mask (the image terms' scale).
-    pub(super) level: f64,
-    pub(super) outline: &'a OutlineSettings,
+    pub(in crate::estimate) level: f64,
+    pub(in crate::estimate) outline: &'a OutlineSettings,
 }
 
 impl PoseContext<'_> {
     /// Records the objective at `pose_vars` with the soft mask and, when
     /// given, the rendered image.
-    pub(super) fn evaluate<'t>(
+    pub(in crate::estimate) fn evaluate<'t>(
         &self,
         tape: &'t Tape<f64>,
         pose_vars: &PoseVars<'t, f64>,
@@ -113,7 +114,7 @@ pub(crate) fn pose_adam(iters: usize, depth: f32, steps: PoseSteps, outline: &Ou
 /// reports every term's value (and, every `OutlineSettings::gradient_norm_every`
 /// evaluations and at the last, its gradient norm). A failed evaluation
 /// (the probe left the view) ends the phase with its error.
-pub(super) fn fit_pose<R>(
+pub(in crate::estimate) fn fit_pose<R>(
     name: &str,
     start: Pose,
     iters: usize,
@@ -189,7 +190,7 @@ where
 /// the silhouette alone): returns the pose, the final loss and the report.
 /// The orientation prior holds the start near its own orientation (one
 /// towards a common orientation would pull every start there).
-pub(super) fn fit_silhouette(
+pub(in crate::estimate) fn fit_silhouette(
     ctx: &PoseContext,
     name: &str,
     start: Pose,
@@ -230,7 +231,7 @@ pub(super) fn fit_silhouette(
 
 /// A short silhouette refit of `start` (a turned or mirrored pose), from
 /// where the priors are spent.
-pub(super) fn refit_silhouette(
+pub(in crate::estimate) fn refit_silhouette(
     ctx: &PoseContext,
     name: &str,
     start: Pose,
@@ -248,7 +249,11 @@ pub(super) fn refit_silhouette(
 /// short where the outline tells a turn of the axis weakly (a can seen
 /// nearly end on), and a sharp probe's reflections show such an error. It
 /// costs about a start's fit; see docs/results/decisions.md 6.8, The polish.
-pub(super) fn polish_silhouette(ctx: &PoseContext, start: Pose, settings: &Settings) -> Result<(Pose, PhaseReport)> {
+pub(in crate::estimate) fn polish_silhouette(
+    ctx: &PoseContext,
+    start: Pose,
+    settings: &Settings,
+) -> Result<(Pose, PhaseReport)> {
     let progress = ctx.outline.progress..ctx.outline.progress;
     let iters = (settings.outline.iters, PoseSteps::Polish);
     let (fitted, _, report) = fit_silhouette(ctx, "silhouette_polish", start, iters, progress, settings.seed)?;
@@ -264,7 +269,7 @@ pub(super) fn polish_silhouette(ctx: &PoseContext, start: Pose, settings: &Setti
 
 /// The silhouette loss (the objective without rendering, priors spent) at
 /// `pose`, the orientation prior towards `pose` itself.
-pub(super) fn silhouette_loss(ctx: &PoseContext, pose: &Pose, seed: u64) -> Result<f64> {
+pub(in crate::estimate) fn silhouette_loss(ctx: &PoseContext, pose: &Pose, seed: u64) -> Result<f64> {
     let ctx = PoseContext {
         front_facing: pose.rotation,
         ..*ctx
@@ -277,7 +282,7 @@ pub(super) fn silhouette_loss(ctx: &PoseContext, pose: &Pose, seed: u64) -> Resu
 
 /// The pose by the whole objective (image and mask terms) under the fixed
 /// lighting `env`, in joint round `round`.
-pub(super) fn fit_pose_to_image(
+pub(in crate::estimate) fn fit_pose_to_image(
     ctx: &PoseContext,
     start: Pose,
     env: &EnvMap,

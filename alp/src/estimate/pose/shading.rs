@@ -12,16 +12,16 @@ use rayon::prelude::*;
 use render::accel::Accel;
 use render::pose::Pose;
 
-use super::Probe;
 use super::hypotheses;
-use super::photo::Photo;
-use super::settings::OrientationSettings;
+use crate::estimate::Probe;
+use crate::estimate::photo::Photo;
+use crate::estimate::settings::OrientationSettings;
 use crate::objective::mask_mean_luminance;
 
 /// The label variation of a probe's turns in one photo: the mesh's BVH in
 /// its own frame (a pose moves the camera's rays, not the mesh), and the
 /// photo's blocks it reads.
-pub(super) struct LabelVariation<'a> {
+pub(in crate::estimate) struct LabelVariation<'a> {
     probe: &'a Probe<'a>,
     photo: &'a Photo,
     accel: Accel,
@@ -53,7 +53,7 @@ const SUBPIXELS: [Vec2; 4] = [
 ];
 
 impl<'a> LabelVariation<'a> {
-    pub(super) fn new(
+    pub(in crate::estimate) fn new(
         probe: &'a Probe<'a>,
         photo: &'a Photo,
         clipped: &[bool],
@@ -116,7 +116,7 @@ impl<'a> LabelVariation<'a> {
     /// difference of the chromatic part of `log(photo / albedo)`: each
     /// block's log ratio less its mean over the channels. Infinite when no
     /// pair is read.
-    pub(super) fn at(&self, pose: &Pose) -> f64 {
+    pub(in crate::estimate) fn at(&self, pose: &Pose) -> f64 {
         let to_mesh = pose.to_world().inverse();
         let w = self.photo.mask.width;
         let block = self.block;
@@ -156,7 +156,7 @@ impl<'a> LabelVariation<'a> {
     /// circle, then halving steps about the best down to
     /// `OrientationSettings::yaw_refine_deg`. Returns the turn and its
     /// variation.
-    pub(super) fn best_turn(&self, pose: &Pose, o: &OrientationSettings) -> (f32, f64) {
+    pub(in crate::estimate) fn best_turn(&self, pose: &Pose, o: &OrientationSettings) -> (f32, f64) {
         let mesh = &self.probe.asset.mesh;
         let at = |turn: f32| self.at(&hypotheses::turned(pose, mesh, turn));
         let step = o.label_scan_deg.max(o.yaw_refine_deg);
