@@ -23,9 +23,11 @@ use serde::{Deserialize, Serialize};
 
 use render::RenderError;
 
+use crate::cli::photo::{ProbeMarking, read_inputs};
+use crate::cli::{ThreadsArg, parse_quality, parse_size};
 use crate::error::{Error, Result};
-use crate::estimate::cli::{ProbeMarking, parse_quality, parse_size, read_inputs, write_estimate};
 use crate::estimate::{Settings, estimate};
+use crate::output::write_estimate;
 
 /// One line of the manifest.
 #[derive(Clone, Debug, Deserialize)]
@@ -349,9 +351,8 @@ pub struct BatchArgs {
     /// Skip photos finished before (their `OUT/<id>/` exists); failed ones run again.
     #[arg(long)]
     pub resume: bool,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub threads: ThreadsArg,
     /// Join the shards' summaries in this folder into summary.jsonl and summary.csv.
     #[arg(long, value_name = "OUT")]
     pub merge: Option<PathBuf>,
@@ -378,7 +379,7 @@ pub fn cli(args: &BatchArgs) -> Result<()> {
         shard: args.shard,
         resume: args.resume,
     };
-    let pool = crate::estimate::cli::thread_pool(args.threads)?;
+    let pool = args.threads.pool()?;
     let outcomes = pool.install(|| {
         run(manifest, out, options, |o| match &o.error {
             Some(e) => eprintln!("alp batch: {} (line {}) failed: {e}", o.id, o.line),

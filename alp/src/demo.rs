@@ -132,7 +132,7 @@ fn run_into(dir: &Path) -> Result<DemoReport> {
     let result = estimate(&input, &can.asset, &Settings::new(Quality::Default))?;
     let estimate_dir = dir.join("estimate");
     std::fs::create_dir_all(&estimate_dir).map_err(|e| RenderError::io(&estimate_dir, "create folder", e))?;
-    crate::estimate::cli::write_estimate(&estimate_dir, &input, &result)?;
+    crate::output::write_estimate(&estimate_dir, &input, &result)?;
     let estimate_s = clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();

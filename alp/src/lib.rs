@@ -36,6 +36,7 @@
 
 pub mod acquire;
 pub mod batch;
+pub mod cli;
 pub mod demo;
 pub mod error;
 pub mod estimate;

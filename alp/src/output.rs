@@ -8,8 +8,10 @@
 use std::path::{Path, PathBuf};
 
 use render::RenderError;
+use render::image_io::RgbImage;
 
 use crate::error::Result;
+use crate::estimate::{Estimate, Photo};
 
 /// Runs `write` on a fresh temporary folder beside `out`, then replaces `out` with it.
 pub fn write_folder_atomically(out: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
@@ -125,6 +127,43 @@ pub fn write_image_and_preview(out: &Path, image: &render::image_io::RgbImage) -
         (out, Box::new(|p| Ok(image.write_exr(p)?))),
         (&png, Box::new(|p| Ok(image.write_png_preview(p, 0.0)?))),
     ])
+}
+
+/// Writes an estimate's files into `dir`: `env.exr`, `pose.json`,
+/// `confidence.exr`, `rerender.exr`, `mask_found.png`, `preview.png`,
+/// `report.json` and `camera.json` (the camera it used, the EXIF's when
+/// none was given: for `alp insert` and `alp render`).
+pub(crate) fn write_estimate(dir: &Path, photo: &Photo, result: &Estimate) -> Result<()> {
+    photo.camera.write(dir.join("camera.json"))?;
+    result.env.write(dir.join("env.exr"))?;
+    result.outline.write_png(dir.join("mask_found.png"))?;
+    result.pose.write(dir.join("pose.json"))?;
+    result.confidence.write(dir.join("confidence.exr"))?;
+    result.rerender.write_exr(dir.join("rerender.exr"))?;
+    preview(&photo.image, &result.rerender, &result.env.to_image()).write_png_preview(dir.join("preview.png"), 0.0)?;
+    let json = serde_json::to_string_pretty(&result.report)
+        .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
+    std::fs::write(dir.join("report.json"), json + "\n")
+        .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
+}
+
+/// Photo, re-render and env map side by side (the map scaled to the photo's height).
+fn preview(photo: &RgbImage, rerender: &RgbImage, env: &RgbImage) -> RgbImage {
+    let h = photo.height;
+    let env_w = 2 * h;
+    let width = 2 * photo.width + env_w;
+    let mut out = RgbImage::filled(width, h, [0.0; 3]);
+    for r in 0..h {
+        for c in 0..photo.width {
+            out.pixels[r * width + c] = photo.pixels[r * photo.width + c];
+            out.pixels[r * width + photo.width + c] = rerender.pixels[r * photo.width + c];
+        }
+        for c in 0..env_w {
+            let (er, ec) = (r * env.height / h, c * env.width / env_w);
+            out.pixels[r * width + 2 * photo.width + c] = env.pixels[er * env.width + ec];
+        }
+    }
+    out
 }
 
 #[cfg(test)]

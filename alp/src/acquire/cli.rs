@@ -11,8 +11,8 @@ use super::capture::Capture;
 use super::registration::RegistrationSettings;
 use super::truth::Truth;
 use super::{AcquireSettings, Acquisition, Solver, acquire};
+use crate::cli::{QualityArg, ThreadsArg, progress_bar};
 use crate::error::{Error, Result};
-use crate::estimate::cli::{parse_quality, progress_bar, thread_pool};
 
 /// Flags of `alp acquire`.
 #[derive(clap::Args, Debug)]
@@ -27,12 +27,10 @@ pub struct AcquireArgs {
     /// Texture size, WIDTHxHEIGHT.
     #[arg(long, default_value = "512x256")]
     pub texture_size: String,
-    /// fast, default or best.
-    #[arg(long, default_value = "default")]
-    pub quality: String,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub quality: QualityArg,
+    #[command(flatten)]
+    pub threads: ThreadsArg,
     /// Texture solve: least-squares (a roughness search, a grooved scan's
     /// turn by the same search, and an exact albedo solve) or adam (Adam on
     /// the re-rendering error: several times slower, and less accurate on
@@ -99,7 +97,7 @@ const MAX_SIDE: usize = 4096;
 /// Reads and checks the capture, acquires the probe and writes the folder.
 pub fn run(args: &AcquireArgs) -> Result<()> {
     let size = parse_texture_size(&args.texture_size)?;
-    let mut settings = AcquireSettings::preset(parse_quality(&args.quality)?);
+    let mut settings = AcquireSettings::preset(args.quality.preset()?);
     settings.solver = parse_solver(&args.solver)?;
     match args.registration.as_str() {
         "on" => settings.registration = Some(RegistrationSettings::preset(settings.quality)),
@@ -118,7 +116,7 @@ pub fn run(args: &AcquireArgs) -> Result<()> {
     };
     *albedo = weight("--albedo-smoothness", args.albedo_smoothness, *albedo)?;
     *roughness = weight("--roughness-smoothness", args.roughness_smoothness, *roughness)?;
-    let pool = thread_pool(args.threads)?;
+    let pool = args.threads.pool()?;
     let capture = Capture::read(&args.captures)?;
     let truth = Truth::read(&args.captures)?;
     let name = args

@@ -1,22 +1,19 @@
 //! `alp estimate`: the main job, from files to an output folder.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
-use render::RenderError;
 use render::bsdf::GgxMetal;
-use render::camera::Camera;
-use render::exif_camera::camera_from_exif;
-use render::image_io::{Mask, PhotoEncoding, RgbImage};
 use render::pose::Pose;
 
+use crate::cli::photo::{ProbeMarking, read_inputs};
+use crate::cli::{QualityArg, ThreadsArg, parse_size, progress_bar};
 use crate::error::{Error, Result};
 
-use super::probe_box::{ProbeBox, mask_in_box};
 use super::settings::ADAM_LIGHTING;
 use super::settings::LightingMethod;
-use super::{Estimate, Photo, Quality, Settings, estimate_with};
+use super::{Settings, estimate_with};
 use crate::objective::Objective;
 
 /// Flags of `alp estimate`.
@@ -45,15 +42,13 @@ pub struct EstimateArgs {
     /// Output folder (written whole or not at all).
     #[arg(long)]
     pub out: PathBuf,
-    /// fast, default or best.
-    #[arg(long, default_value = "default")]
-    pub quality: String,
+    #[command(flatten)]
+    pub quality: QualityArg,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub threads: ThreadsArg,
     /// The probe's pose.json when it is known: the lighting alone is estimated.
     #[arg(long)]
     pub pose: Option<PathBuf>,
@@ -86,18 +81,6 @@ pub struct EstimateArgs {
     pub lighting: String,
 }
 
-pub(crate) fn parse_quality(q: &str) -> Result<Quality> {
-    match q {
-        "fast" => Ok(Quality::Fast),
-        "default" => Ok(Quality::Default),
-        "best" => Ok(Quality::Best),
-        other => Err(Error::invalid(
-            "--quality",
-            format!("`{other}` is not one of fast, default, best"),
-        )),
-    }
-}
-
 pub(crate) fn parse_lighting(method: &str) -> Result<LightingMethod> {
     match method {
         "least-squares" => Ok(LightingMethod::LeastSquares),
@@ -109,26 +92,11 @@ pub(crate) fn parse_lighting(method: &str) -> Result<LightingMethod> {
     }
 }
 
-pub(crate) fn parse_size(s: &str) -> Result<(usize, usize)> {
-    let bad = || {
-        Error::invalid(
-            "--env-size",
-            format!("`{s}` is not WIDTHxHEIGHT with WIDTH = 2 x HEIGHT"),
-        )
-    };
-    let (w, h) = s.split_once('x').ok_or_else(bad)?;
-    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if w != 2 * h || h < 2 {
-        return Err(bad());
-    }
-    Ok((w, h))
-}
-
 /// Runs the estimation and writes `env.exr`, `pose.json`, `confidence.exr`,
 /// `rerender.exr`, `mask_found.png`, `preview.png`, `report.json` and
 /// `camera.json` into `--out`.
 pub fn run(args: &EstimateArgs) -> Result<()> {
-    let mut settings = Settings::new(parse_quality(&args.quality)?);
+    let mut settings = Settings::new(args.quality.preset()?);
     settings.seed = args.seed;
     settings.env_size = parse_size(&args.env_size)?;
     settings.lighting.method = parse_lighting(&args.lighting)?;
@@ -158,7 +126,7 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     };
     let photo = read_inputs(&args.image, marking, args.camera.as_deref(), &settings)?;
     let probe = crate::probes::load(&args.probe)?;
-    let pool = thread_pool(args.threads)?;
+    let pool = args.threads.pool()?;
     let verbose = std::io::stderr().is_terminal();
     let bar = progress_bar(verbose, "alp estimate {bar:30} {pos}/{len} phases, {elapsed} {msg}");
     let result = pool.install(|| {
@@ -183,122 +151,5 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
         }
         eprintln!("  PSNR {:.2} dB, {:.2} s", result.report.psnr_db, result.report.wall_s);
     }
-    crate::output::write_folder_atomically(&args.out, |dir| write_estimate(dir, &photo, &result))
-}
-
-/// What marks the probe in the photo, as the user gives it.
-pub(crate) enum ProbeMarking<'a> {
-    /// A mask image.
-    Mask(&'a Path),
-    /// A box round it, `x0,y0,x1,y1`, given as `field` (its errors name it).
-    Box { text: &'a str, field: &'a str },
-}
-
-/// The photo at `image` as the user gives it: the probe marked by a mask
-/// or a box (its first outline then found by colour inside it,
-/// [`mask_in_box`]), the camera from `camera` or else the image's EXIF.
-pub(crate) fn read_inputs(
-    image_path: &Path,
-    marking: ProbeMarking,
-    camera: Option<&Path>,
-    settings: &Settings,
-) -> Result<Photo> {
-    let (image, encoding) = read_photo(image_path)?;
-    let camera = match camera {
-        Some(path) => Camera::read(path)?,
-        None => {
-            let camera = camera_from_exif(image_path, image.width as u32, image.height as u32)?;
-            eprintln!(
-                "alp: the camera from {}'s EXIF: vertical field of view {:.2} deg, at the origin looking along -z",
-                image_path.display(),
-                camera.fov_y_deg
-            );
-            camera
-        }
-    };
-    let mask = match marking {
-        ProbeMarking::Mask(path) => Mask::read_png(path)?,
-        ProbeMarking::Box { text, field } => {
-            let probe_box =
-                ProbeBox::parse(text, image.width, image.height).map_err(|e| Error::invalid(field, e.rule()))?;
-            mask_in_box(&image, &probe_box, &settings.photo.probe_box)?
-        }
-    };
-    Ok(Photo::new(image, mask, camera)
-        .map_err(|e| e.in_file(image_path))?
-        .with_encoding(encoding))
-}
-
-/// Writes an estimate's files into `dir`: `env.exr`, `pose.json`,
-/// `confidence.exr`, `rerender.exr`, `mask_found.png`, `preview.png`,
-/// `report.json` and `camera.json` (the camera it used, the EXIF's when
-/// none was given: for `alp insert` and `alp render`).
-pub(crate) fn write_estimate(dir: &Path, photo: &Photo, result: &Estimate) -> Result<()> {
-    photo.camera.write(dir.join("camera.json"))?;
-    result.env.write(dir.join("env.exr"))?;
-    result.outline.write_png(dir.join("mask_found.png"))?;
-    result.pose.write(dir.join("pose.json"))?;
-    result.confidence.write(dir.join("confidence.exr"))?;
-    result.rerender.write_exr(dir.join("rerender.exr"))?;
-    preview(&photo.image, &result.rerender, &result.env.to_image()).write_png_preview(dir.join("preview.png"), 0.0)?;
-    let json = serde_json::to_string_pretty(&result.report)
-        .map_err(|e| RenderError::io(dir.join("report.json"), "serialise", e))?;
-    std::fs::write(dir.join("report.json"), json + "\n")
-        .map_err(|e| RenderError::io(dir.join("report.json"), "write", e).into())
-}
-
-/// Reads a photo (OpenEXR, Radiance HDR, PNG or JPEG: [`RgbImage::read_photo`]),
-/// warning on stderr when it is display-referred sRGB; and how it was stored.
-pub(crate) fn read_photo(path: &Path) -> Result<(RgbImage, PhotoEncoding)> {
-    let (image, encoding) = RgbImage::read_photo(path)?;
-    if let PhotoEncoding::Srgb { bits } = encoding {
-        eprintln!(
-            "alp: warning: {} is a {bits}-bit sRGB image, not HDR: it is linearised, its clipped highlights are \
-             read as lower bounds (the brightest lights may come out dimmer than they are) and its exposure is \
-             unknown (the map is right up to one scale)",
-            path.display()
-        );
-    }
-    Ok((image, encoding))
-}
-
-/// A pool of `threads` workers (all cores when `None`).
-pub(crate) fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
-    if threads == Some(0) {
-        return Err(Error::invalid("--threads", "needs at least one thread"));
-    }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or_else(rayon::current_num_threads))
-        .build()
-        .map_err(|e| Error::invalid("--threads", e.to_string()))
-}
-
-/// A progress bar on a terminal (`verbose`), hidden otherwise.
-pub(crate) fn progress_bar(verbose: bool, template: &str) -> indicatif::ProgressBar {
-    let bar = if verbose {
-        indicatif::ProgressBar::new(1)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("a valid template"));
-    bar
-}
-
-/// Photo, re-render and env map side by side (the map scaled to the photo's height).
-fn preview(photo: &RgbImage, rerender: &RgbImage, env: &RgbImage) -> RgbImage {
-    let h = photo.height;
-    let env_w = 2 * h;
-    let width = 2 * photo.width + env_w;
-    let mut out = RgbImage::filled(width, h, [0.0; 3]);
-    for r in 0..h {
-        for c in 0..photo.width {
-            out.pixels[r * width + c] = photo.pixels[r * photo.width + c];
-            out.pixels[r * width + photo.width + c] = rerender.pixels[r * photo.width + c];
-        }
-        for c in 0..env_w {
-            let (er, ec) = (r * env.height / h, c * env.width / env_w);
-            out.pixels[r * width + 2 * photo.width + c] = env.pixels[er * env.width + ec];
-        }
-    }
-    out
+    crate::output::write_folder_atomically(&args.out, |dir| crate::output::write_estimate(dir, &photo, &result))
 }

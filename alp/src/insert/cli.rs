@@ -108,7 +108,7 @@ fn parse_albedo(s: &str) -> Result<[f32; 3]> {
 pub fn run(args: &InsertArgs) -> Result<()> {
     let material = material(args)?;
     let object = VirtualObject::load(&args.object, material.as_ref())?;
-    let (photo, _) = crate::estimate::cli::read_photo(&args.image)?;
+    let (photo, _) = crate::cli::photo::read_photo(&args.image)?;
     let env = EnvMap::read(&args.env)?;
     let camera = Camera::read(&args.camera)?;
     let pose = Pose::read(&args.pose)?;

@@ -3,8 +3,8 @@
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
+use crate::cli::progress_bar;
 use crate::error::{Error, Result};
-use crate::estimate::cli::progress_bar;
 use crate::relight::RelightSettings;
 
 use super::record::{Results, Row, write_atomically};

@@ -254,7 +254,7 @@ fn run_one(scene: &StudyScene, truth: &RelitSpheres, variant: &Variant, context:
         },
         None => &scene.photo,
     };
-    let pool = crate::estimate::cli::thread_pool(Some(variant.threads))?;
+    let pool = crate::cli::thread_pool(Some(variant.threads))?;
     reset_peak_resident();
     let started = Instant::now();
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match &variant.method {
