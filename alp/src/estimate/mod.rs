@@ -48,8 +48,8 @@ pub use settings::{Quality, Settings};
 use probe::Probe;
 
 use lighting::{MapSizes, env_from_texels, final_fit, lighting_report};
-use pose::judgement::PhotoJudge;
-use pose::orientation::{PoseSearch, search_pose};
+use pose::orientation::PoseSearch;
+use pose::{PoseFound, PoseInput};
 use report::{PhaseLog, WorkingImage};
 
 use crate::error::{Error, Result};
@@ -104,33 +104,20 @@ pub fn estimate_with(
     let reference = ReferenceMask::new(&photo.mask)?;
     let sizes = MapSizes::new(asset, &settings.lighting)?;
     let mut phases = PhaseLog::new(settings.phase_count(), on_phase);
-    // The orientation search, from the outline and the colours.
-    let searched = match known_pose {
-        Some(_) => None,
-        None => Some(search_pose(
-            &probe,
-            photo,
-            &reference,
-            clipped,
-            sizes.search,
-            settings,
-            &mut phases,
-        )?),
-    };
-    let (pose, rivals, patterned) = match (&searched, known_pose) {
-        (Some(search), _) => (search.pose, search.rivals.clone(), !search.symmetric),
-        (None, pose) => (pose.expect("a known pose"), Vec::new(), false),
-    };
-    // The photo judges what the outline cannot tell.
-    let judge = PhotoJudge {
+    // The pose, by the method the settings select.
+    let input = PoseInput {
         probe: &probe,
         photo,
+        reference: &reference,
         clipped,
-        work: sizes.search,
+        sizes: &sizes,
         settings,
-        searched: searched.is_some(),
+        known_pose,
     };
-    let judged = judge.judge(&mut phases, pose, rivals, patterned)?;
+    let PoseFound {
+        search: searched,
+        judged,
+    } = pose::method(settings.pose_method).find(&input, &mut phases)?;
     // The output map.
     let t2 = Instant::now();
     let pilot = judged.pilot.as_deref();

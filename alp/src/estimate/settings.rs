@@ -61,6 +61,16 @@ impl Smoothness {
     }
 }
 
+/// The pose methods the estimate knows (`estimate::pose::method` maps
+/// each to its implementation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PoseMethodName {
+    /// Axis hypotheses fitted to the outline, their turns ranked by colour,
+    /// then the size, lean and rivals judged by the photo.
+    OutlineThenPhoto,
+}
+
 /// How a lighting solve minimises its objective.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -124,6 +134,8 @@ pub struct Settings {
     pub lighting: LightingSettings,
     /// The photo-scored pose searches.
     pub pose_search: PoseSearchSettings,
+    /// How the pose is found ([`PoseMethodName`]).
+    pub pose_method: PoseMethodName,
     /// Joint rounds of pose and lighting after the search.
     pub joint: JointSettings,
 }
@@ -601,6 +613,7 @@ impl Default for Settings {
                 size_step_px: 0.0,
                 size_reach_px: 2.0,
             },
+            pose_method: PoseMethodName::OutlineThenPhoto,
             joint: JointSettings {
                 rounds: 0,
                 pose_iters: 20,
