@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use autodiff::Tape;
 use render::bsdf::GgxMetal;
 use render::envmap::EnvMap;
-use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, shade};
+use render::integrator::{PrimaryHits, ProbeScene, ProbeVars, RenderSettings};
 use render::lookup::ImageVars;
 use render::posed::{PoseVars, PosedMesh, pack_pose};
 use serde_json::json;
@@ -51,16 +51,16 @@ fn main() {
                 let posed = PosedMesh::new(&probe_vars.mesh, &pose_vars);
                 let hits = PrimaryHits::trace(&probe.mesh, &posed.position_values(), &camera, &settings);
                 let t_trace = t0.elapsed().as_secs_f64();
-                let rgb = shade(
-                    &tape,
-                    &hits,
-                    &camera,
-                    &probe_vars,
-                    &posed,
-                    &probe.mesh.triangles,
-                    &env_vars,
-                    &GgxMetal,
-                );
+                let rgb = ProbeScene {
+                    tape: &tape,
+                    hits: &hits,
+                    camera: &camera,
+                    probe: &probe_vars,
+                    posed: &posed,
+                    triangles: &probe.mesh.triangles,
+                    bsdf: &GgxMetal,
+                }
+                .shade(&env_vars);
                 let mut l1 = None;
                 for (c, channel) in rgb.iter().enumerate() {
                     let target: Vec<f32> = hits.pixels.iter().map(|&p| photo.pixels[p as usize][c]).collect();

@@ -14,7 +14,7 @@ use glam::Vec3;
 use optim::{Bounds, Lbfgs, Solver};
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
-use render::integrator::{LightSamples, PrimaryHits, ProbeVars, RenderSettings, light_samples};
+use render::integrator::{LightSamples, LightSampling, PrimaryHits, ProbeScene, ProbeVars, RenderSettings};
 use render::lookup::ImageVars;
 use render::pose::Pose;
 use render::posed::{PoseVars, PosedMesh, pack_pose};
@@ -82,7 +82,16 @@ impl<'t> Rendering<'t> {
         let posed = PosedMesh::new(&vars.mesh, &pose);
         let settings = RenderSettings { spp: 4, seed: 11 };
         let hits = PrimaryHits::trace(&probe.mesh, &posed.position_values(), &camera, &settings);
-        let samples = light_samples(tape, &hits, &camera, &vars, &posed, &probe.mesh.triangles, &GgxMetal);
+        let samples = ProbeScene {
+            tape,
+            hits: &hits,
+            camera: &camera,
+            probe: &vars,
+            posed: &posed,
+            triangles: &probe.mesh.triangles,
+            bsdf: &GgxMetal,
+        }
+        .light_samples(&LightSampling::BSDF);
         let mark = tape.mark();
         Rendering { tape, samples, mark }
     }

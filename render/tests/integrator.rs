@@ -9,8 +9,7 @@ use render::bsdf::{Bsdf, GgxMetal, Lambertian, Mirror};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::integrator::{
-    LightSamples, LightSampling, PrimaryHits, ProbeVars, RenderSettings, coverage_mask, light_samples_with,
-    render_image, shade,
+    LightSamples, LightSampling, PrimaryHits, ProbeScene, ProbeVars, RenderSettings, coverage_mask, render_image,
 };
 use render::lookup::{ImageVars, TextureVars, image_texels};
 use render::mesh::Mesh;
@@ -56,16 +55,16 @@ fn render_pixels(
     let mut hits = PrimaryHits::trace(&probe.mesh, &posed.position_values(), camera, &settings);
     hits.retain_pixels(keep);
     let env_vars = ImageVars::env(&tape, env, false);
-    let rgb = light_samples_with(
-        &tape,
-        &hits,
+    let rgb = ProbeScene {
+        tape: &tape,
+        hits: &hits,
         camera,
-        &vars,
-        &posed,
-        &probe.mesh.triangles,
+        probe: &vars,
+        posed: &posed,
+        triangles: &probe.mesh.triangles,
         bsdf,
-        sampling,
-    )
+    }
+    .light_samples(sampling)
     .radiance(&env_vars);
     let values = rgb.map(|c| tape.to_vec(c));
     (hits, values)
@@ -468,16 +467,16 @@ impl GradScene {
         env: &ImageVars<'t, f64>,
         sampling: &LightSampling,
     ) -> autodiff::Var<'t, f64> {
-        let rgb = light_samples_with(
-            t,
-            &self.hits,
-            &self.camera,
+        let rgb = ProbeScene {
+            tape: t,
+            hits: &self.hits,
+            camera: &self.camera,
             probe,
             posed,
-            &self.probe.mesh.triangles,
-            &GgxMetal,
-            sampling,
-        )
+            triangles: &self.probe.mesh.triangles,
+            bsdf: &GgxMetal,
+        }
+        .light_samples(sampling)
         .radiance(env);
         t.concat(&rgb)
     }
@@ -491,7 +490,16 @@ fn light_samples_of<'t>(tape: &'t Tape<f64>, g: &GradScene, sampling: &LightSamp
     let probe = ProbeVars::new(tape, &g.probe, false);
     let posed = PosedMesh::new(&probe.mesh, &PoseVars::new(tape, &pack_pose(&g.pose), false));
     let triangles = &g.probe.mesh.triangles;
-    light_samples_with(tape, &g.hits, &g.camera, &probe, &posed, triangles, &GgxMetal, sampling)
+    ProbeScene {
+        tape,
+        hits: &g.hits,
+        camera: &g.camera,
+        probe: &probe,
+        posed: &posed,
+        triangles,
+        bsdf: &GgxMetal,
+    }
+    .light_samples(sampling)
 }
 
 /// The gradient checks: the side view by BRDF sampling and by MIS, and the
@@ -770,16 +778,16 @@ fn each_pixel_averages_its_own_samples() {
     let vars = ProbeVars::new(&tape, &probe, false);
     let posed = PosedMesh::new(&vars.mesh, &PoseVars::new(&tape, &pack_pose(&Pose::IDENTITY), false));
     let env = ImageVars::env(&tape, &EnvMap::constant(4, [1.0; 3]), false);
-    let rgb = shade(
-        &tape,
-        &hits,
-        &camera,
-        &vars,
-        &posed,
-        &probe.mesh.triangles,
-        &env,
-        &Lambertian,
-    );
+    let rgb = ProbeScene {
+        tape: &tape,
+        hits: &hits,
+        camera: &camera,
+        probe: &vars,
+        posed: &posed,
+        triangles: &probe.mesh.triangles,
+        bsdf: &Lambertian,
+    }
+    .shade(&env);
     for (k, value) in tape.to_vec(rgb[0]).iter().enumerate() {
         assert!(
             (value - hits.coverage[k] as f64).abs() < 1e-6,

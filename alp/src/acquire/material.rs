@@ -23,7 +23,7 @@ use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
 use render::bsdf::Bsdf;
 use render::image_io::RgbImage;
-use render::integrator::{LightSampling, PROBE_BOUNCES, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use render::integrator::{LightSampling, PROBE_BOUNCES, PrimaryHits, ProbeScene, ProbeVars, RenderSettings};
 use render::lookup::{ImageVars, TextureVars};
 use render::mesh::Mesh;
 use render::pose::Pose;
@@ -374,16 +374,16 @@ pub(crate) fn render<'t>(
     hits: &PrimaryHits,
 ) -> [Var<'t, f32>; 3] {
     let Scene { probe, posed, env } = scene;
-    light_samples_with(
+    ProbeScene {
         tape,
         hits,
-        placed.views[v].camera,
+        camera: placed.views[v].camera,
         probe,
         posed,
-        &placed.mesh.triangles,
-        placed.bsdf,
-        &LightSampling::mis(&placed.sampler).with_bounces(PROBE_BOUNCES),
-    )
+        triangles: &placed.mesh.triangles,
+        bsdf: placed.bsdf,
+    }
+    .light_samples(&LightSampling::mis(&placed.sampler).with_bounces(PROBE_BOUNCES))
     .radiance(env)
 }
 

@@ -35,7 +35,7 @@ use render::colour::luminance;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
 use render::integrator::{
-    LightSamples, LightSampling, PROBE_BOUNCES, PrimaryHits, ProbeVars, RenderSettings, light_samples_with,
+    LightSamples, LightSampling, PROBE_BOUNCES, PrimaryHits, ProbeScene, ProbeVars, RenderSettings,
 };
 use render::lookup::{ImageVars, TextureVars};
 use render::mesh::Mesh;
@@ -281,17 +281,26 @@ fn observe_view(
             let direct = LightSampling::mis(&placed.sampler);
             let triangles = &placed.mesh.triangles;
             let bsdf = placed.bsdf;
-            let dark = light_samples_with(&tape, &hits, view.camera, &zero, &posed, triangles, bsdf, &direct);
-            let bright = light_samples_with(
-                &tape,
-                &hits,
-                view.camera,
-                &one,
-                &posed,
+            let dark = ProbeScene {
+                tape: &tape,
+                hits: &hits,
+                camera: view.camera,
+                probe: &zero,
+                posed: &posed,
                 triangles,
                 bsdf,
-                &direct.with_bounces(PROBE_BOUNCES),
-            );
+            }
+            .light_samples(&direct);
+            let bright = ProbeScene {
+                tape: &tape,
+                hits: &hits,
+                camera: view.camera,
+                probe: &one,
+                posed: &posed,
+                triangles,
+                bsdf,
+            }
+            .light_samples(&direct.with_bounces(PROBE_BOUNCES));
             let light = |samples: &LightSamples<'_, f32>| -> [Vec<f32>; 3] {
                 let l = env.env_radiance(samples.wi);
                 std::array::from_fn(|c| tape.to_vec(samples.throughput[c] * l[c]))

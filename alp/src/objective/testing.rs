@@ -17,7 +17,7 @@ use glam::{Quat, Vec3};
 use render::bsdf::GgxMetal;
 use render::camera::Camera;
 use render::envmap::EnvMap;
-use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, light_samples, render_image};
+use render::integrator::{LightSampling, PrimaryHits, ProbeScene, ProbeVars, RenderSettings, render_image};
 use render::lookup::{ImageVars, image_texels};
 use render::pose::Pose;
 use render::posed::{PoseVars, PosedMesh, pack_pose};
@@ -201,15 +201,16 @@ impl Fixture {
         let posed = PosedMesh::new(&probe.mesh, &pose);
         let soft_mask = self.plan.soft_mask(&posed);
         let env = ImageVars::from_texels(env_texels, self.env.width(), self.env.height());
-        let rendered = light_samples(
+        let rendered = ProbeScene {
             tape,
-            &self.hits,
-            &self.camera,
-            &probe,
-            &posed,
-            &self.probe.mesh.triangles,
-            &GgxMetal,
-        )
+            hits: &self.hits,
+            camera: &self.camera,
+            probe: &probe,
+            posed: &posed,
+            triangles: &self.probe.mesh.triangles,
+            bsdf: &GgxMetal,
+        }
+        .light_samples(&LightSampling::BSDF)
         .radiance(&env);
         let image = ImageTerms::new(&self.hits.pixels, rendered, &self.target, &self.weight, self.level)?;
         Ok(f(&TermContext {

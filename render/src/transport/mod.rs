@@ -15,7 +15,7 @@ use autodiff::Tape;
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::envmap::direction_to_uv;
-use crate::integrator::{LightSampling, PrimaryHits, ProbeVars, RenderSettings, light_samples_with};
+use crate::integrator::{LightSampling, PrimaryHits, ProbeScene, ProbeVars, RenderSettings};
 use crate::lookup::env_taps;
 use crate::pose::Pose;
 use crate::posed::{PoseVars, PosedMesh, pack_pose};
@@ -155,16 +155,16 @@ impl SampleRecord {
                     .enumerate()
                     .for_each(|(k, &p)| row[p as usize] = k as u32);
             }
-            let samples = light_samples_with(
-                &tape,
-                &hits,
+            let samples = ProbeScene {
+                tape: &tape,
+                hits: &hits,
                 camera,
-                &vars,
-                &posed,
-                &asset.mesh.triangles,
+                probe: &vars,
+                posed: &posed,
+                triangles: &asset.mesh.triangles,
                 bsdf,
-                sampling,
-            );
+            }
+            .light_samples(sampling);
             let d = [samples.wi.x, samples.wi.y, samples.wi.z].map(|v| tape.to_vec(v));
             let tp = samples.throughput.map(|t| tape.to_vec(t));
             let pass_lit = tape.to_vec(samples.lit);

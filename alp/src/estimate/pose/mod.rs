@@ -4,7 +4,7 @@
 //! ([`shading`]), put together in [`orientation`]; then what only the photo
 //! tells -- the size, the lean, the chosen pose against its rivals, a small
 //! probe's refinement -- in [`judgement`]. Together they are one
-//! [`PoseMethod`]; `Settings::pose_method` selects which the estimate runs.
+//! `PoseMethod`; `Settings::pose_method` selects which the estimate runs.
 
 pub mod hypotheses;
 pub mod judgement;

@@ -13,7 +13,7 @@ use glam::Quat;
 use optim::schedule::Cosine;
 use optim::{Adam, ParamGroup, Solver};
 use render::envmap::EnvMap;
-use render::integrator::{PrimaryHits, ProbeVars, RenderSettings, light_samples};
+use render::integrator::{LightSampling, PrimaryHits, ProbeScene, ProbeVars, RenderSettings};
 use render::lookup::ImageVars;
 use render::pose::Pose;
 use render::posed::{POSE_PARAMS, PoseVars, PosedMesh, pack_pose, unpack_pose};
@@ -312,15 +312,16 @@ pub(in crate::estimate) fn fit_pose_to_image(
                 return Err(Error::invalid("pose", "the probe left the camera's view"));
             }
             let env_vars = ImageVars::env(tape, env, false);
-            let rendered = light_samples(
+            let rendered = ProbeScene {
                 tape,
-                &hits,
-                &photo.camera,
-                &vars,
-                &posed,
-                &ctx.probe.asset.mesh.triangles,
-                ctx.probe.bsdf,
-            )
+                hits: &hits,
+                camera: &photo.camera,
+                probe: &vars,
+                posed: &posed,
+                triangles: &ctx.probe.asset.mesh.triangles,
+                bsdf: ctx.probe.bsdf,
+            }
+            .light_samples(&LightSampling::BSDF)
             .radiance(&env_vars);
             let target: Vec<[f64; 3]> = hits
                 .pixels
