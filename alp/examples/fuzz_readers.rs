@@ -410,7 +410,8 @@ fn fuzz_reader(options: &Options, reader: &Reader) -> Result<BTreeMap<u64, Outco
                 "error" => Outcome::Error,
                 "unnamed" => Outcome::Unnamed(message),
                 "panic" => Outcome::Panic(message),
-                _ => Outcome::Hang,
+                "hang" => Outcome::Hang,
+                _ => continue, // not a record of ours
             };
             outcomes.insert(index, outcome);
             next = index + 1;

@@ -27,7 +27,7 @@ const MAX_EXR_EXPANSION: u64 = 2048;
 const MAX_DECODE_BYTES: u64 = 4 * MAX_PIXELS;
 
 /// Fails on a `width x height` image of `path` with more than [`MAX_PIXELS`].
-pub fn check_image_size(path: &Path, width: u64, height: u64) -> Result<()> {
+fn check_image_size(path: &Path, width: u64, height: u64) -> Result<()> {
     match width.checked_mul(height) {
         Some(pixels) if pixels <= MAX_PIXELS => Ok(()),
         _ => Err(RenderError::file(
@@ -553,23 +553,23 @@ mod tests {
             4
         );
         let (x_max, y_max) = (8, 12);
-        for (name, key, patches, rule) in [
+        // Each case: the file, the attribute, the (offset, value) patches, the rule named.
+        let huge = [(x_max, 1 << 20), (y_max, 1 << 20)];
+        let long = [(x_max, 4095), (y_max, 4095)];
+        // The first channel's x sampling: past its name "B\0", type, linearity, reserved.
+        let no_sampling = [(10, 0)];
+        let cases = [
             (
                 "huge.exr",
                 &window[..],
-                [(x_max, 1 << 20), (y_max, 1 << 20)],
+                &huge[..],
                 "more than the 268435456 an image may have",
             ),
-            (
-                "long.exr",
-                window,
-                [(x_max, 4095), (y_max, 4095)],
-                "more than the file's",
-            ),
-            // The first channel's x sampling: past its name "B\0", type, linearity, reserved.
-            ("sampling.exr", b"channels\0chlist\0", [(10, 0), (10, 0)], "sampling"),
-        ] {
-            let error = RgbImage::read_exr(exr_patched(&dir, name, key, &patches))
+            ("long.exr", &window[..], &long[..], "more than the file's"),
+            ("sampling.exr", &b"channels\0chlist\0"[..], &no_sampling[..], "sampling"),
+        ];
+        for (name, key, patches, rule) in cases {
+            let error = RgbImage::read_exr(exr_patched(&dir, name, key, patches))
                 .expect_err(name)
                 .to_string();
             assert!(error.contains(name) && error.contains(rule), "{error}");
