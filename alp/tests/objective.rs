@@ -8,8 +8,8 @@ use std::sync::{Arc, OnceLock};
 use alp::Result;
 use alp::objective::testing::{Fixture, check_term};
 use alp::objective::{
-    Barycenter, Chamfer, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, RgbVariant, Term, TermContext,
-    Weight, Weighting,
+    Barycenter, Chamfer, LeastSquaresData, LightSmoothness, MaskL1, Objective, OrientationPrior, Phase, Phases, RgbL1,
+    RgbVariant, Term, TermContext, Weight, Weighting,
 };
 use autodiff::{CustomOp, Tape, Var};
 use render::colour::luminance;
@@ -141,17 +141,11 @@ fn the_paper_default_composes_the_estimates_terms_and_reports_each() {
         let names: Vec<&str> = eval.terms.iter().map(|t| t.name.as_str()).collect();
         assert_eq!(
             names,
-            [
-                "rgb_l1",
-                "mask_l1",
-                "chamfer",
-                "barycenter",
-                "orientation",
-                "light_smoothness"
-            ]
+            ["rgb_l1", "mask_l1", "chamfer", "barycenter", "orientation",],
+            "the pose phase's terms"
         );
         let weights: Vec<f64> = eval.terms.iter().map(|t| t.weight).collect();
-        for (got, want) in weights.iter().zip([1.0, 1.0, 1.0, 5.0, 0.05, 0.01]) {
+        for (got, want) in weights.iter().zip([1.0, 1.0, 1.0, 5.0, 0.05]) {
             assert!((got - want).abs() < 1e-15, "{weights:?}");
         }
         let values = eval.values();
@@ -223,7 +217,11 @@ fn terms_apply_only_where_their_inputs_are_recorded() {
         let eval = objective.evaluate(&pose_only).expect("the orientation prior applies");
         assert_eq!(eval.terms.len(), 1);
         let e = Objective::new().term(RgbL1::log()).evaluate(&pose_only).unwrap_err();
-        assert!(e.to_string().contains("none of its terms (rgb_l1_log) applies"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("none of its pose phase's terms (rgb_l1_log) applies"),
+            "{e}"
+        );
     });
 }
 
@@ -288,11 +286,62 @@ fn gradient_norms_equal_each_terms_own_gradient() {
 }
 
 #[test]
-fn smoothness_weight_is_there_for_the_linear_solve() {
-    assert_eq!(Objective::paper_default().smoothness_weight(0.3), Some(1e-2));
-    assert_eq!(Objective::new().term(Chamfer).smoothness_weight(0.3), None);
-    let decaying = Objective::new().term(LightSmoothness::new(1.0).weight(Weight::decay_to_zero(0.4, 0.5)));
-    assert_eq!(decaying.smoothness_weight(0.25), Some(0.2));
+fn every_term_belongs_to_a_phase_that_records_what_it_reads() {
+    let default = Objective::paper_default();
+    assert_eq!(
+        default.names_in(Phase::Pose),
+        ["rgb_l1", "mask_l1", "chamfer", "barycenter", "orientation"]
+    );
+    assert_eq!(
+        default.names_in(Phase::Lighting),
+        ["data_least_squares", "neighbour_smoothness"]
+    );
+    // The RGB L1 may be minimised by both phases; the lighting phase
+    // renders no soft mask and the pose phases hold the map fixed.
+    let both = Objective::new().term(RgbL1::log().weight(1.0).in_phases(Phases::BOTH));
+    assert!(both.validate().is_ok());
+    assert_eq!(both.names_in(Phase::Lighting), ["rgb_l1_log"]);
+    for (term, what) in [
+        (
+            Chamfer.weight(1.0).in_phases(Phases::LIGHTING),
+            "it reads the soft mask",
+        ),
+        (
+            LightSmoothness::new(2.0).weight(1.0).in_phases(Phases::POSE),
+            "the env map as a variable",
+        ),
+        (
+            LeastSquaresData.weight(1.0).in_phases(Phases::BOTH),
+            "the lighting solve's data",
+        ),
+        (MaskL1.weight(1.0).in_phases(Phases::NONE), "evaluated by no phase"),
+    ] {
+        let name = term.term().name().to_string();
+        let e = Objective::new().term(term).validate().unwrap_err();
+        let message = e.to_string();
+        assert!(message.contains(&name) && message.contains(what), "{message}");
+    }
+    // In a file, as `phases`.
+    let text = r#"{"terms": [
+        {"term": "rgb_l1", "phases": ["pose", "lighting"]},
+        {"term": "neighbour_smoothness", "edge": 0.1, "chroma": 2.0, "weight": 0.02}
+    ]}"#;
+    let objective = Objective::from_json_str(text, "objective.json").expect("a valid objective");
+    assert_eq!(objective.names_in(Phase::Lighting), ["rgb_l1", "neighbour_smoothness"]);
+    assert_eq!(objective.names_in(Phase::Pose), ["rgb_l1"]);
+    let text = "{\"terms\": [\n  {\"term\": \"chamfer\", \"phases\": [\"lighting\"]}\n]}";
+    let e = Objective::from_json_str(text, "objective.json")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("objective.json") && e.contains("chamfer") && e.contains("lighting phase"),
+        "{e}"
+    );
+    assert_file_error(
+        "{\"terms\": [\n  {\"term\": \"mask_l1\", \"phases\": [\"light\"]}\n]}",
+        2,
+        "unknown phase `light`",
+    );
 }
 
 #[test]
@@ -308,9 +357,13 @@ fn bad_contexts_and_weights_are_errors() {
         );
         let e = Objective::new().evaluate(ctx).unwrap_err();
         assert!(e.to_string().contains("no terms"), "{e}");
+        let lighting = TermContext {
+            phase: Phase::Lighting,
+            ..*ctx
+        };
         let e = Objective::new()
             .term(LightSmoothness::new(-2.0))
-            .evaluate(ctx)
+            .evaluate(&lighting)
             .unwrap_err();
         assert_eq!(e.field_name(), Some("sigma_deg"), "{e}");
     });

@@ -208,11 +208,14 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
         ];
         estimate(&scene, out, &options)
     };
-    // Mask terms only: the pose phases then never render.
+    // Mask terms only for the pose (its phases then never render), and
+    // for the lighting the data term and the paper's smoothness, which the
+    // lighting phase minimises on a tape.
     let good = dir.join("masks_only.json");
     std::fs::write(
         &good,
-        "{\"terms\": [\n  {\"term\": \"mask_l1\"},\n  {\"term\": \"chamfer\", \"weight\": 0.5}\n]}\n",
+        "{\"terms\": [\n  {\"term\": \"mask_l1\"},\n  {\"term\": \"chamfer\", \"weight\": 0.5},\n  \
+         {\"term\": \"data_least_squares\"},\n  {\"term\": \"light_smoothness\", \"sigma_deg\": 5, \"weight\": 0.01}\n]}\n",
     )
     .expect("write objective");
     let out = estimate(&good, &dir.join("good"));
@@ -232,6 +235,30 @@ fn estimate_takes_an_objective_file_and_refuses_a_bad_one_naming_the_line() {
         .map(|t| t["name"].as_str().expect("name"))
         .collect();
     assert_eq!(names, ["mask_l1", "chamfer"]);
+    assert_eq!(
+        report["objective"]["lighting"],
+        serde_json::json!(["data_least_squares", "light_smoothness"])
+    );
+    assert_eq!(report["objective"]["lighting_solve"], "tape");
+    let last = report["phases"].as_array().expect("phases").last().expect("a phase");
+    assert_eq!(last["name"], "lighting_final");
+    let loss = last["loss"].as_object().expect("the lighting terms' values");
+    assert!(
+        loss.contains_key("data_least_squares") && loss.contains_key("light_smoothness"),
+        "{loss:?}"
+    );
+
+    // Without a lighting term the map would be unconstrained: an error
+    // naming the file, before the photo is read.
+    let no_lighting = dir.join("no_lighting.json");
+    std::fs::write(&no_lighting, "{\"terms\": [{\"term\": \"mask_l1\"}]}\n").expect("write objective");
+    let out = estimate(&no_lighting, &dir.join("no_lighting"));
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("no_lighting.json") && stderr(&out).contains("no term for the lighting phase"),
+        "{}",
+        stderr(&out)
+    );
 
     let bad = dir.join("bad.json");
     std::fs::write(

@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use super::settings::ADAM_LIGHTING;
 use super::settings::LightingMethod;
 use super::{Settings, estimate_with};
+use crate::estimate::lighting::LightingTerms;
 use crate::objective::Objective;
 
 /// Flags of `alp estimate`.
@@ -75,8 +76,10 @@ pub struct EstimateArgs {
     #[arg(long)]
     pub blur: Option<f32>,
     /// How the lighting is solved: `least-squares` (the exact bounded
-    /// solve) or `adam` (the paper's recipe: many Adam steps on the same
-    /// loss, several times the time).
+    /// solve where the objective's lighting terms have its form), `tape`
+    /// (the terms recorded on a tape at each step, as any declared term
+    /// is) or `adam` (the paper's recipe: many Adam steps on the same loss,
+    /// several times the time).
     #[arg(long, default_value = "least-squares")]
     pub lighting: String,
 }
@@ -85,9 +88,10 @@ pub(crate) fn parse_lighting(method: &str) -> Result<LightingMethod> {
     match method {
         "least-squares" => Ok(LightingMethod::LeastSquares),
         "adam" => Ok(ADAM_LIGHTING),
+        "tape" => Ok(LightingMethod::Tape),
         other => Err(Error::invalid(
             "--lighting",
-            format!("`{other}` is not one of least-squares, adam"),
+            format!("`{other}` is not one of least-squares, tape, adam"),
         )),
     }
 }
@@ -118,6 +122,9 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
     settings.known_pose = args.pose.as_ref().map(Pose::read).transpose()?;
     if let Some(path) = &args.objective {
         settings.objective = Arc::new(Objective::from_file(path)?);
+        // What only the estimate needs of it (a lighting term), checked
+        // before the photo is read.
+        LightingTerms::compile(settings.objective.clone(), settings.lighting.method).map_err(|e| e.in_file(path))?;
     }
     let marking = match (&args.mask, &args.probe_box) {
         (Some(path), _) => ProbeMarking::Mask(path),

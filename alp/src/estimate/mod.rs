@@ -47,7 +47,7 @@ pub use settings::{Quality, Settings};
 
 use probe::Probe;
 
-use lighting::{MapSizes, env_from_texels, final_fit, lighting_report};
+use lighting::{LightingTerms, MapSizes, OutputSolve, env_from_texels, final_fit, lighting_report};
 use pose::orientation::PoseSearch;
 use pose::{PoseFound, PoseInput};
 use report::{PhaseLog, WorkingImage};
@@ -74,6 +74,8 @@ pub fn estimate_with(
     on_phase: &mut dyn FnMut(&PhaseReport, usize, usize),
 ) -> Result<Estimate> {
     let t0 = Instant::now();
+    // The objective's lighting terms, compiled before any work is done.
+    let terms = LightingTerms::compile(settings.objective.clone(), settings.lighting.method)?;
     let out_size = settings.env_size;
     if out_size.0 != 2 * out_size.1 || out_size.1 < 2 {
         let (w, h) = out_size;
@@ -121,7 +123,8 @@ pub fn estimate_with(
     // The output map.
     let t2 = Instant::now();
     let pilot = judged.pilot.as_deref();
-    let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, pilot, &sizes, settings)?;
+    let output = OutputSolve { pilot, terms: &terms };
+    let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, output, &sizes, settings)?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
     let (env, confidence) = fit.output_maps(sizes.work, out_size)?;
@@ -165,6 +168,7 @@ pub fn estimate_with(
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
         blur,
         final_spp,
+        objective: report::ObjectiveReport::new(&settings.objective, terms.is_exact()),
         phases: phases.phases,
         psnr_db: final_psnr,
         wall_s: t0.elapsed().as_secs_f64(),

@@ -93,6 +93,8 @@ pub struct Report {
     /// fewer for a probe so large in the photo that they would overrun
     /// `LightingSettings::final_sample_budget`.
     pub final_spp: u32,
+    /// The objective's terms by phase.
+    pub objective: ObjectiveReport,
     /// Every phase, in order.
     pub phases: Vec<PhaseReport>,
     /// Final re-rendering PSNR inside the mask, dB.
@@ -139,6 +141,33 @@ pub struct PhaseReport {
     /// The process's resident memory as the phase ended, MB (where the
     /// system tells it): flat from one phase of a kind to the next.
     pub resident_mb: Option<f64>,
+}
+
+/// The terms each phase evaluated, in order: their values are in the
+/// phases' reports (the pose phases' `loss` and `per_iteration`, the
+/// `lighting_final` phase's `loss`).
+#[derive(Clone, Debug, Serialize)]
+pub struct ObjectiveReport {
+    /// The pose phases' terms.
+    pub pose: Vec<String>,
+    /// The lighting phase's terms.
+    pub lighting: Vec<String>,
+    /// How the lighting terms were minimised: `exact` (compiled to the
+    /// least-squares solve) or `tape`.
+    pub lighting_solve: &'static str,
+}
+
+impl ObjectiveReport {
+    /// The account of `objective`, its lighting terms minimised exactly or not.
+    pub fn new(objective: &crate::objective::Objective, exact: bool) -> Self {
+        use crate::objective::Phase;
+        let names = |phase| objective.names_in(phase).into_iter().map(String::from).collect();
+        ObjectiveReport {
+            pose: names(Phase::Pose),
+            lighting: names(Phase::Lighting),
+            lighting_solve: if exact { "exact" } else { "tape" },
+        }
+    }
 }
 
 /// The process's resident set size, MB (Linux `/proc/self/status`; None elsewhere).

@@ -9,57 +9,7 @@ use render::pose::Pose;
 use render::sampling::EnvSampler;
 use serde::Serialize;
 
-use crate::objective::Objective;
-
-/// The smoothness prior of a lighting solve: neighbouring texels'
-/// differences, penalised quadratically up to `edge` and linearly beyond.
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct Smoothness {
-    /// Weight of the term (relative to the data term, scale-free).
-    pub weight: f64,
-    /// The RMS difference of two neighbours over the channels, as a
-    /// fraction of the level it is measured against, past which the
-    /// penalty grows linearly (a vectorial Charbonnier penalty: an edge
-    /// costs in proportion to its height, not its square, so a light's
-    /// edge stays sharp, and its three channels share one cost, so they
-    /// keep their edge in one place instead of fringing in colour).
-    /// 0: quadratic at every difference.
-    pub edge: f64,
-    /// The weight of a difference's chromatic part (its channels'
-    /// departure from their mean) against its grey part: above 1, colour
-    /// varies more slowly over the map than brightness, as in real scenes,
-    /// so a direction whose colour the photo hardly shows (seen through a
-    /// red label, its green and blue dim) takes its neighbours' colour
-    /// instead of fitting noise. 1: the channels apart.
-    pub chroma: f64,
-    /// How much the photo must tell of two texels for an edge between
-    /// them to stay sharp: a pair's edge grows by `1 + edge_evidence / r`
-    /// in square, `r` the lesser of its texels' data curvature over their
-    /// prior curvature. Where the photo tells little (a direction seen
-    /// through a rough or dark region, or by a few pixels), the penalty
-    /// stays quadratic and the map smooth, instead of keeping the steps
-    /// and single bright texels that noise drew there. 0: one edge
-    /// everywhere.
-    pub edge_evidence: f64,
-}
-
-impl Smoothness {
-    /// Quadratic smoothness of `weight`, the channels apart.
-    pub fn quadratic(weight: f64) -> Self {
-        Smoothness {
-            weight,
-            edge: 0.0,
-            chroma: 1.0,
-            edge_evidence: 0.0,
-        }
-    }
-
-    /// The curvature of a neighbour pair's penalty in one channel of one
-    /// texel, per unit of `lambda area q`, at small differences.
-    pub(crate) fn channel_curvature(&self) -> f64 {
-        (2.0 + 4.0 * self.chroma) / 3.0
-    }
-}
+use crate::objective::{NeighbourSmoothness, Objective, Weighting};
 
 /// The pose methods the estimate knows (`estimate::pose::method` maps
 /// each to its implementation).
@@ -76,8 +26,13 @@ pub enum PoseMethodName {
 #[serde(rename_all = "kebab-case")]
 pub enum LightingMethod {
     /// Bounded L-BFGS on the Jacobi-preconditioned problem: the exact
-    /// solve, in a few hundred evaluations.
+    /// solve, in a few hundred evaluations, where the lighting terms have
+    /// its form (the default's do); else as `Tape`.
     LeastSquares,
+    /// The same L-BFGS on the lighting terms recorded on a tape at every
+    /// evaluation, even where the exact solve covers them: what any
+    /// declared term gets, to compare.
+    Tape,
     /// The paper's recipe (PAPER.md, the official code): Adam steps on the
     /// texels themselves, `steps_per_iteration` for each L-BFGS iteration
     /// the solve would have had, at `rate` times the start's mean level,
@@ -113,8 +68,9 @@ pub struct Settings {
     pub seed: u64,
     /// Output env map size (width, height), width = 2 x height.
     pub env_size: (usize, usize),
-    /// The loss the pose phases minimise; its smoothness weight is the
-    /// lighting solves' while the pose is searched.
+    /// The loss: its pose terms are what the outline fits and the joint
+    /// rounds minimise, its lighting terms what the output map's solve
+    /// minimises (the report lists both).
     #[serde(skip)]
     pub objective: Arc<Objective>,
     /// The probe's pose when it is known (the lighting alone is estimated).
@@ -390,9 +346,6 @@ pub struct LightingSettings {
     /// Weight of the quadratic smoothness of the pilot's and the searches'
     /// maps: sharper lights against noise where the probe sees poorly.
     pub smoothness: f64,
-    /// The final map's smoothness, linear past an edge: sharp where the
-    /// data show an edge, strong elsewhere.
-    pub final_smoothness: Smoothness,
     /// The output map's least radiance of a texel, as a fraction of its
     /// local level: no direction is black, and a black texel has no colour.
     pub floor_of_level: f64,
@@ -470,6 +423,10 @@ pub struct JointSettings {
     pub pose_iters: usize,
     /// Samples per pixel while fitting the pose.
     pub spp: u32,
+    /// Weight of the quadratic smoothness of the maps the rounds fit the
+    /// pose under: a detailed map would explain a misplaced texture away
+    /// and hide the pose error from the image loss.
+    pub map_smoothness: f64,
 }
 
 /// The paper's lighting recipe as `alp estimate --lighting adam` runs it:
@@ -585,12 +542,6 @@ impl Default for Settings {
                 working_height: None,
                 search_height: 64,
                 smoothness: 0.003,
-                final_smoothness: Smoothness {
-                    weight: 0.01,
-                    edge: 0.05,
-                    chroma: 1.0,
-                    edge_evidence: 0.0,
-                },
                 floor_of_level: 0.02,
                 clipped_light_share: 0.5,
                 edge_contrast: 0.15,
@@ -618,6 +569,7 @@ impl Default for Settings {
                 rounds: 0,
                 pose_iters: 20,
                 spp: 2,
+                map_smoothness: 1e-2,
             },
         }
     }
@@ -684,11 +636,15 @@ impl Settings {
     }
 
     /// Fewer starts, iterations and samples; no photo searches (no lean
-    /// step) and a quadratic final smoothness.
+    /// step) and a quadratic smoothness of the output map (weight 0.003).
     pub fn fast() -> Self {
         let d = Self::default();
+        let objective = Objective::paper_default()
+            .without(&["neighbour_smoothness"])
+            .term(NeighbourSmoothness::quadratic().weight(0.003));
         Settings {
             quality: Quality::Fast,
+            objective: Arc::new(objective),
             outline: OutlineSettings { iters: 40, ..d.outline },
             orientation: OrientationSettings {
                 starts_deg: yaws(4),
@@ -700,7 +656,6 @@ impl Settings {
                 spp_pilot: 8,
                 spp_lean: 8,
                 spp_final: 8,
-                final_smoothness: Smoothness::quadratic(0.003),
                 ..d.lighting
             },
             pose_search: PoseSearchSettings {

@@ -16,8 +16,8 @@ use render::RenderError;
 use crate::error::Result;
 
 use super::{
-    Barycenter, Chamfer, DecayShape, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, RgbVariant, Weight,
-    WeightedTerm, Weighting,
+    Barycenter, Chamfer, DecayShape, LeastSquaresData, LightSmoothness, MaskL1, NeighbourSmoothness, Objective,
+    OrientationPrior, Phase, Phases, RgbL1, RgbVariant, Weight, WeightedTerm, Weighting,
 };
 
 #[derive(Deserialize)]
@@ -36,16 +36,20 @@ enum TermKind {
     Barycenter,
     Orientation,
     LightSmoothness,
+    DataLeastSquares,
+    NeighbourSmoothness,
 }
 
 impl TermKind {
-    const ALL: [(TermKind, &'static str); 6] = [
+    const ALL: [(TermKind, &'static str); 8] = [
         (TermKind::RgbL1, "rgb_l1"),
         (TermKind::MaskL1, "mask_l1"),
         (TermKind::Chamfer, "chamfer"),
         (TermKind::Barycenter, "barycenter"),
         (TermKind::Orientation, "orientation"),
         (TermKind::LightSmoothness, "light_smoothness"),
+        (TermKind::DataLeastSquares, "data_least_squares"),
+        (TermKind::NeighbourSmoothness, "neighbour_smoothness"),
     ];
 
     fn name(self) -> &'static str {
@@ -80,6 +84,19 @@ struct TermSpec {
     variant: Option<RgbVariant>,
     sigma_deg: Option<f64>,
     directions: Option<usize>,
+    edge: Option<f64>,
+    chroma: Option<f64>,
+    phases: Option<Vec<Phase>>,
+}
+
+impl<'de> Deserialize<'de> for Phase {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        Phase::ALL
+            .into_iter()
+            .find(|p| p.name() == name)
+            .ok_or_else(|| de::Error::custom(format!("unknown phase `{name}`: the phases are pose, lighting")))
+    }
 }
 
 /// A weight is a number, or `{"decay_to_zero": initial, "until": fraction,
@@ -210,8 +227,16 @@ impl TermSpec {
                 return Err(misplaced("directions", "light_smoothness").into());
             }
         }
+        if self.term != TermKind::NeighbourSmoothness {
+            if self.edge.is_some() {
+                return Err(misplaced("edge", "neighbour_smoothness").into());
+            }
+            if self.chroma.is_some() {
+                return Err(misplaced("chroma", "neighbour_smoothness").into());
+            }
+        }
         let weight = self.weight.unwrap_or(Weight::Constant(1.0));
-        Ok(match self.term {
+        let term = match self.term {
             TermKind::RgbL1 => RgbL1::new(self.variant.unwrap_or(RgbVariant::Relative)).weight(weight),
             TermKind::MaskL1 => MaskL1.weight(weight),
             TermKind::Chamfer => Chamfer.weight(weight),
@@ -229,6 +254,20 @@ impl TermSpec {
                 })?;
                 term.weight(weight)
             }
+            TermKind::DataLeastSquares => LeastSquaresData.weight(weight),
+            TermKind::NeighbourSmoothness => {
+                let term =
+                    NeighbourSmoothness::charbonnier(self.edge.unwrap_or(0.0)).chroma(self.chroma.unwrap_or(1.0));
+                term.validate().map_err(|e| {
+                    let key = e.field_name().unwrap_or("edge");
+                    source.field_error(index, raw, key, &e.rule())
+                })?;
+                term.weight(weight)
+            }
+        };
+        Ok(match self.phases {
+            None => term,
+            Some(phases) => term.in_phases(phases.into_iter().fold(Phases::NONE, Phases::with)),
         })
     }
 }
@@ -244,14 +283,20 @@ impl Objective {
     ///   {"term": "chamfer", "weight": 0.5},
     ///   {"term": "barycenter", "weight": {"decay_to_zero": 10.0, "until": 0.5}},
     ///   {"term": "orientation", "weight": {"decay_to_zero": 0.1, "until": 1.0, "shape": "cosine"}},
-    ///   {"term": "light_smoothness", "sigma_deg": 2.0, "directions": 1024, "weight": 1e-2}
+    ///   {"term": "data_least_squares"},
+    ///   {"term": "neighbour_smoothness", "edge": 0.05, "chroma": 1.0, "weight": 1e-2},
+    ///   {"term": "light_smoothness", "sigma_deg": 2.0, "directions": 1024, "weight": 1e-3}
     /// ]}
     /// ```
     ///
     /// A term's `weight` is 1 when left out, a number, or a decay to zero
     /// (`shape` linear, the default, or cosine); `variant` (rgb_l1 only) is
     /// relative (the default), plain, log or tonemapped; `sigma_deg` is
-    /// required by light_smoothness, `directions` optional (1024).
+    /// required by light_smoothness, `directions` optional (1024); `edge`
+    /// (0: quadratic) and `chroma` (1) are neighbour_smoothness's. Any term
+    /// may say which `phases` evaluate it (`["pose"]`, `["lighting"]` or
+    /// both; by default its own: the data and smoothness terms the
+    /// lighting phase, the rest the pose phases).
     /// `assets/objectives/paper_default.json` is [`Objective::paper_default`].
     ///
     /// Unknown terms or fields, a field that does not apply to its term,

@@ -9,7 +9,7 @@ use autodiff::{Var, Vec3 as Vec3Var};
 use glam::Vec3;
 use render::sampling::{Frame, Rng, sample_uniform_sphere};
 
-use super::{Term, TermContext};
+use super::{Input, Phases, Term, TermContext};
 use crate::error::{Error, Result};
 
 /// The random stream of the directions (any fixed number: other samplers
@@ -23,7 +23,9 @@ const DIRECTION_STREAM: u64 = 0x5100_7e55;
 /// components are normal with standard deviation `sigma_deg`. The pairs are
 /// drawn from the context's seed: vary it per iteration, as the paper does.
 ///
-/// Applies when the env map is on the tape ([`TermContext::env`]).
+/// Applies when the env map is on the tape ([`TermContext::env`]): in the
+/// lighting phase. Its pairs are drawn from the context's seed, which the
+/// lighting phase holds fixed over its solve.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LightSmoothness {
     sigma_deg: f64,
@@ -97,6 +99,14 @@ fn direction_vars<'t>(tape: &'t autodiff::Tape<f64>, d: &[Vec3]) -> Vec3Var<'t, 
 impl Term for LightSmoothness {
     fn name(&self) -> &str {
         "light_smoothness"
+    }
+
+    fn reads(&self) -> &'static [Input] {
+        &[Input::Env]
+    }
+
+    fn phases(&self) -> Phases {
+        Phases::LIGHTING
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {

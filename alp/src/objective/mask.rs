@@ -3,7 +3,7 @@
 
 use autodiff::Var;
 
-use super::{Term, TermContext};
+use super::{Input, Term, TermContext};
 use crate::error::Result;
 
 /// Mean absolute difference of the soft mask and the photo's mask over the
@@ -14,6 +14,10 @@ pub struct MaskL1;
 impl Term for MaskL1 {
     fn name(&self) -> &str {
         "mask_l1"
+    }
+
+    fn reads(&self) -> &'static [Input] {
+        &[Input::SoftMask]
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {
@@ -32,6 +36,10 @@ pub struct Chamfer;
 impl Term for Chamfer {
     fn name(&self) -> &str {
         "chamfer"
+    }
+
+    fn reads(&self) -> &'static [Input] {
+        &[Input::SoftMask]
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {

@@ -6,35 +6,45 @@
 //! ```
 //!
 //! as a list of weighted [`Term`]s, each recorded on the tape from what the
-//! phase has (the pose always; the soft mask, the rendered image and the env
-//! map when the phase records them), each reporting its own value and
-//! gradient norm.
+//! phase has, each reporting its own value and gradient norm. Every term
+//! belongs to one or both [`Phase`]s: the pose phases (the pose optimised,
+//! the map held; the soft mask and the rendered image recorded) and the
+//! lighting phase (the map optimised at the found pose; its pixels by the
+//! light transport, [`render::transport::TransportOp`]). A term declared
+//! for a phase that does not record what it reads is an error, never
+//! silence.
 //!
 //! ```
-//! use alp::objective::{Barycenter, Chamfer, LightSmoothness, MaskL1, Objective, OrientationPrior, RgbL1, Weight, Weighting};
+//! use alp::objective::{Barycenter, Chamfer, LeastSquaresData, LightSmoothness, MaskL1, NeighbourSmoothness, Objective, OrientationPrior, Phase, Phases, RgbL1, Weight, Weighting};
 //! let objective = Objective::new()
 //!     .term(RgbL1::log())
 //!     .term(MaskL1)
 //!     .term(Chamfer.weight(0.5))
 //!     .term(Barycenter.weight(Weight::decay_to_zero(10.0, 1.0)))
 //!     .term(OrientationPrior::front_facing().weight(Weight::decay_to_zero(0.1, 1.0)))
-//!     .term(LightSmoothness::new(2.0).weight(1e-2));
-//! assert_eq!(objective.smoothness_weight(0.5), Some(1e-2));
+//!     .term(LeastSquaresData)
+//!     .term(NeighbourSmoothness::charbonnier(0.05).weight(1e-2))
+//!     .term(LightSmoothness::new(2.0).weight(1e-3));
+//! assert!(objective.validate().is_ok());
+//! assert_eq!(objective.names_in(Phase::Lighting), ["data_least_squares", "neighbour_smoothness", "light_smoothness"]);
+//! // The mask terms read the soft mask, which the lighting phase does not record.
+//! let wrong = Objective::new().term(MaskL1.weight(1.0).in_phases(Phases::LIGHTING));
+//! assert!(wrong.validate().unwrap_err().to_string().contains("soft mask"));
 //! ```
 //!
 //! The same objective as a JSON file: see [`Objective::from_json_str`]. A
 //! new term implements [`Term`] over tape ops and checks its gradient with
 //! [`testing::check_term`] (`examples/custom_loss.rs`).
 
+mod data_least_squares;
 mod file;
 mod light_smoothness;
 mod mask;
+mod neighbour_smoothness;
 mod pose_prior;
 mod rgb;
 pub mod testing;
 mod weight;
-
-use std::any::Any;
 
 use autodiff::{Tape, Var};
 use glam::Quat;
@@ -46,32 +56,175 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 
+pub use data_least_squares::{DataTerm, LeastSquaresData};
 pub use light_smoothness::LightSmoothness;
 pub use mask::{Chamfer, MaskL1};
+pub use neighbour_smoothness::{
+    DARK_LEVEL, LightingInputs, NeighbourSmoothness, Pair, Prior, PriorBasis, Smoothness, clipped_lights,
+};
 pub use pose_prior::{Barycenter, OrientationPrior};
 pub use rgb::{DARK_FRACTION, RgbL1, RgbVariant, mask_mean_luminance};
 pub use weight::{DecayShape, Weight};
+
+/// The estimate's phases, in which the objective's terms are evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Phase {
+    /// The pose optimised, the map held: the outline fits (soft mask) and
+    /// the joint rounds (soft mask and rendered image).
+    Pose,
+    /// The output map optimised at the found pose: the rendered pixels are
+    /// the light transport applied to the map on the tape.
+    Lighting,
+}
+
+impl Phase {
+    /// Both phases, in order.
+    pub const ALL: [Phase; 2] = [Phase::Pose, Phase::Lighting];
+
+    /// The name objective files and reports use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::Pose => "pose",
+            Phase::Lighting => "lighting",
+        }
+    }
+
+    /// What the phase records for its terms (the pose, the camera and the
+    /// photo's mask always: constants in the lighting phase).
+    pub fn records(self) -> &'static [Input] {
+        match self {
+            Phase::Pose => &[Input::SoftMask, Input::Image],
+            Phase::Lighting => &[Input::Image, Input::Env, Input::LightingData],
+        }
+    }
+}
+
+/// A set of phases: where a term is evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Phases {
+    pose: bool,
+    lighting: bool,
+}
+
+impl Phases {
+    /// No phase (an error in an objective).
+    pub const NONE: Phases = Phases {
+        pose: false,
+        lighting: false,
+    };
+    /// The pose phases.
+    pub const POSE: Phases = Phases {
+        pose: true,
+        lighting: false,
+    };
+    /// The lighting phase.
+    pub const LIGHTING: Phases = Phases {
+        pose: false,
+        lighting: true,
+    };
+    /// Both.
+    pub const BOTH: Phases = Phases {
+        pose: true,
+        lighting: true,
+    };
+
+    /// Whether `phase` is in the set.
+    pub fn contains(self, phase: Phase) -> bool {
+        match phase {
+            Phase::Pose => self.pose,
+            Phase::Lighting => self.lighting,
+        }
+    }
+
+    /// The set with `phase` added.
+    pub fn with(self, phase: Phase) -> Phases {
+        match phase {
+            Phase::Pose => Phases { pose: true, ..self },
+            Phase::Lighting => Phases { lighting: true, ..self },
+        }
+    }
+
+    /// The phases in the set, in order.
+    pub fn iter(self) -> impl Iterator<Item = Phase> {
+        Phase::ALL.into_iter().filter(move |&p| self.contains(p))
+    }
+}
+
+/// What a term may read beyond the pose, camera and photo's mask, which
+/// every phase records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Input {
+    /// The rendered soft mask ([`TermContext::soft_mask`]).
+    SoftMask,
+    /// The rendered image and the photo at its pixels ([`TermContext::image`]).
+    Image,
+    /// The env map on the tape ([`TermContext::env`]).
+    Env,
+    /// The lighting solve's data term and prior basis ([`TermContext::lighting`]).
+    LightingData,
+}
+
+impl Input {
+    fn describe(self) -> &'static str {
+        match self {
+            Input::SoftMask => "the soft mask",
+            Input::Image => "the rendered image",
+            Input::Env => "the env map as a variable",
+            Input::LightingData => "the lighting solve's data",
+        }
+    }
+}
+
+/// A form the exact least-squares lighting solve covers: a term that says
+/// it has one is compiled into that solve when every lighting term has one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LeastSquaresForm {
+    /// The weighted squared error of the pixels ([`LeastSquaresData`]).
+    Data,
+    /// The neighbour smoothness ([`NeighbourSmoothness`]).
+    Smoothness(NeighbourSmoothness),
+}
 
 /// One term of the loss: a scalar recorded on the tape from the context.
 ///
 /// Implement it over tape ops (their gradients come from the ops' own
 /// vector-Jacobian products) and check it with [`testing::check_term`].
-pub trait Term: Any + Send + Sync {
+pub trait Term: Send + Sync {
     /// The name reports and objective files use (`snake_case`).
     fn name(&self) -> &str;
 
     /// The term's value (a length-1 array) on `ctx.tape`, or `None` when an
-    /// input it needs is absent in this phase (the RGB term while only the
-    /// silhouette is fitted, the smoothness term while the env map is not on
-    /// the tape).
+    /// input it needs is absent in this stage of its phase (the RGB term
+    /// while only the silhouette is fitted).
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>>;
+
+    /// What the term reads beyond what every phase records: a phase that
+    /// does not record it cannot evaluate the term.
+    fn reads(&self) -> &'static [Input] {
+        &[]
+    }
+
+    /// The phases that evaluate the term unless the objective says
+    /// otherwise ([`WeightedTerm::in_phases`]): the pose phases.
+    fn phases(&self) -> Phases {
+        Phases::POSE
+    }
+
+    /// The term's form in the exact lighting solve, if it has one.
+    fn least_squares_form(&self) -> Option<LeastSquaresForm> {
+        None
+    }
 }
 
 /// What the terms may read: the phase's recorded quantities and the photo's.
 pub struct TermContext<'a, 't> {
+    /// The phase evaluating the terms.
+    pub phase: Phase,
     /// The tape everything is recorded on.
     pub tape: &'t Tape<f64>,
-    /// The probe's pose (the optimised parameters).
+    /// The probe's pose (the optimised parameters; constants in the
+    /// lighting phase).
     pub pose: &'a PoseVars<'t, f64>,
     /// The photo's camera.
     pub camera: &'a Camera,
@@ -83,6 +236,8 @@ pub struct TermContext<'a, 't> {
     pub image: Option<ImageTerms<'a, 't>>,
     /// The env map on the tape, when the phase optimises it.
     pub env: Option<&'a ImageVars<'t, f64>>,
+    /// The lighting solve's data term and prior basis (the lighting phase).
+    pub lighting: Option<&'a LightingInputs>,
     /// The canonical front-facing orientation (`estimate::pose::hypotheses::front_facing`).
     pub front_facing: Quat,
     /// The fraction of the run done, in [0, 1]: what weight schedules follow.
@@ -195,10 +350,11 @@ impl<'a, 't> ImageTerms<'a, 't> {
     }
 }
 
-/// A term and its weight, as the objective holds it.
+/// A term, its weight and its phases, as the objective holds it.
 pub struct WeightedTerm {
     term: Box<dyn Term>,
     weight: Weight,
+    phases: Option<Phases>,
 }
 
 impl WeightedTerm {
@@ -211,30 +367,42 @@ impl WeightedTerm {
     pub fn weight(&self) -> Weight {
         self.weight
     }
+
+    /// The same term evaluated in `phases` instead of its own
+    /// ([`Term::phases`]): an RGB L1 minimised by the lighting phase too.
+    pub fn in_phases(self, phases: Phases) -> Self {
+        WeightedTerm {
+            phases: Some(phases),
+            ..self
+        }
+    }
+
+    /// The phases that evaluate it.
+    pub fn phases(&self) -> Phases {
+        self.phases.unwrap_or_else(|| self.term.phases())
+    }
 }
 
-impl<T: Term> From<T> for WeightedTerm {
+impl<T: Term + 'static> From<T> for WeightedTerm {
     /// The term at weight 1.
     fn from(term: T) -> Self {
-        WeightedTerm {
-            term: Box::new(term),
-            weight: Weight::Constant(1.0),
-        }
+        term.weight(1.0)
     }
 }
 
 /// `.weight(w)` on every term: `Chamfer.weight(0.5)`.
-pub trait Weighting: Term + Sized {
+pub trait Weighting: Term + Sized + 'static {
     /// The term with weight `weight` (a number or a [`Weight`] schedule).
     fn weight(self, weight: impl Into<Weight>) -> WeightedTerm {
         WeightedTerm {
             term: Box::new(self),
             weight: weight.into(),
+            phases: None,
         }
     }
 }
 
-impl<T: Term> Weighting for T {}
+impl<T: Term + 'static> Weighting for T {}
 
 /// A weighted sum of terms.
 #[derive(Default)]
@@ -297,13 +465,15 @@ impl Objective {
         self
     }
 
-    /// The terms and weights of the estimate: relative L1 on RGB (weight 1),
-    /// mask L1 (1) and Chamfer (1, in image diagonals), the barycenter (10)
-    /// and front-facing orientation (0.1) priors decaying linearly to zero
-    /// by progress 0.5 (the end of the estimate's silhouette phase: they
-    /// guide the silhouette fit from a rough start and must not bias the
-    /// final pose), and the lighting smoothness (1e-2, sigma 2 degrees) that
-    /// holds while the pose is searched.
+    /// The terms and weights of the estimate. The pose phases: relative L1
+    /// on RGB (weight 1), mask L1 (1) and Chamfer (1, in image diagonals),
+    /// the barycenter (10) and front-facing orientation (0.1) priors
+    /// decaying linearly to zero by progress 0.5 (the end of the estimate's
+    /// silhouette phase: they guide the silhouette fit from a rough start
+    /// and must not bias the final pose). The lighting phase: the weighted
+    /// least-squares data term (1) and the neighbour smoothness, linear
+    /// past an edge of 0.05 of the local level (1e-2): sharp where the data
+    /// show an edge, strong elsewhere.
     pub fn paper_default() -> Self {
         Objective::new()
             .term(RgbL1::relative())
@@ -311,7 +481,8 @@ impl Objective {
             .term(Chamfer)
             .term(Barycenter.weight(Weight::decay_to_zero(10.0, 0.5)))
             .term(OrientationPrior::front_facing().weight(Weight::decay_to_zero(0.1, 0.5)))
-            .term(LightSmoothness::new(2.0).weight(1e-2))
+            .term(LeastSquaresData)
+            .term(NeighbourSmoothness::charbonnier(0.05).weight(1e-2))
     }
 
     /// The objective less the terms named `names` (an ablation).
@@ -325,39 +496,64 @@ impl Objective {
         &self.terms
     }
 
-    /// Fails on an objective without terms or with an invalid weight.
+    /// The terms `phase` evaluates, in order.
+    pub fn terms_in(&self, phase: Phase) -> impl Iterator<Item = &WeightedTerm> {
+        self.terms.iter().filter(move |t| t.phases().contains(phase))
+    }
+
+    /// The names of the terms `phase` evaluates, in order.
+    pub fn names_in(&self, phase: Phase) -> Vec<&str> {
+        self.terms_in(phase).map(|t| t.term.name()).collect()
+    }
+
+    /// Fails on an objective without terms or with an invalid weight, on a
+    /// term that no phase evaluates, and on one declared for a phase that
+    /// does not record what it reads.
     pub fn validate(&self) -> Result<()> {
         if self.terms.is_empty() {
             return Err(Error::invalid("objective", "has no terms"));
         }
         for t in &self.terms {
-            t.weight.validate().map_err(|e| {
-                Error::invalid(
-                    format!("{} {}", t.term.name(), e.field_name().unwrap_or("weight")),
-                    e.rule(),
-                )
-            })?;
+            let name = t.term.name();
+            t.weight
+                .validate()
+                .map_err(|e| Error::invalid(format!("{name} {}", e.field_name().unwrap_or("weight")), e.rule()))?;
+            let phases = t.phases();
+            if phases == Phases::NONE {
+                return Err(Error::invalid(
+                    format!("term `{name}`"),
+                    "is evaluated by no phase: declare it for the pose or the lighting phase",
+                ));
+            }
+            for phase in phases.iter() {
+                if let Some(input) = t.term.reads().iter().find(|i| !phase.records().contains(i)) {
+                    let recorded = Phase::ALL
+                        .iter()
+                        .filter(|p| p.records().contains(input))
+                        .map(|p| p.name())
+                        .collect::<Vec<_>>();
+                    return Err(Error::invalid(
+                        format!("term `{name}`"),
+                        format!(
+                            "is declared for the {} phase, which cannot evaluate it: it reads {}, which only the {} phase records",
+                            phase.name(),
+                            input.describe(),
+                            recorded.join(" and ")
+                        ),
+                    ));
+                }
+            }
         }
         Ok(())
     }
 
-    /// The summed weight of the lighting smoothness terms at `progress`, for
-    /// a linear lighting solve (its smoothness is scale-free too); `None`
-    /// when the objective has no such term.
-    pub fn smoothness_weight(&self, progress: f64) -> Option<f64> {
-        self.terms
-            .iter()
-            .filter(|t| (t.term.as_ref() as &dyn Any).is::<LightSmoothness>())
-            .map(|t| t.weight.at(progress))
-            .reduce(|a, b| a + b)
-    }
-
-    /// Records every term that applies in `ctx` and their weighted sum.
+    /// Records every term of `ctx.phase` that applies in `ctx` and their
+    /// weighted sum.
     ///
     /// Terms at weight 0 are reported but left out of the total (a NaN in
     /// an unused term cannot poison it). Fails when `ctx.progress` is
-    /// outside [0, 1], a weight is invalid, a term fails or returns more
-    /// than one value, or no term applies.
+    /// outside [0, 1], the objective is invalid, a term fails or returns
+    /// more than one value, or no term applies.
     pub fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Evaluation<'t>> {
         self.validate()?;
         if !(0.0..=1.0).contains(&ctx.progress) {
@@ -368,7 +564,7 @@ impl Objective {
         }
         let mut terms = Vec::with_capacity(self.terms.len());
         let mut total: Option<Var<'t, f64>> = None;
-        for t in &self.terms {
+        for t in self.terms_in(ctx.phase) {
             let Some(value) = t.term.evaluate(ctx)? else { continue };
             let name = t.term.name();
             if value.len() != 1 {
@@ -389,11 +585,12 @@ impl Objective {
             });
         }
         if terms.is_empty() {
-            let names: Vec<&str> = self.terms.iter().map(|t| t.term.name()).collect();
+            let names = self.names_in(ctx.phase);
             return Err(Error::invalid(
                 "objective",
                 format!(
-                    "none of its terms ({}) applies: the phase records none of their inputs",
+                    "none of its {} phase's terms ({}) applies: the phase records none of their inputs",
+                    ctx.phase.name(),
                     names.join(", ")
                 ),
             ));

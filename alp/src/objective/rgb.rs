@@ -7,7 +7,7 @@ use render::colour::luminance;
 use render::image_io::{Mask, RgbImage};
 use serde::Deserialize;
 
-use super::{Term, TermContext};
+use super::{Input, Term, TermContext};
 use crate::error::{Error, Result};
 
 /// The photo's mean luminance inside its mask: the `level` of
@@ -109,6 +109,10 @@ impl Term for RgbL1 {
             RgbVariant::Log => "rgb_l1_log",
             RgbVariant::Tonemapped => "rgb_l1_tonemapped",
         }
+    }
+
+    fn reads(&self) -> &'static [Input] {
+        &[Input::Image]
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {

@@ -27,7 +27,7 @@ use render::silhouette::{ReferenceMask, SilhouettePlan, SilhouetteSettings};
 
 use crate::error::{Error, Result};
 
-use super::{ImageTerms, Term, TermContext, mask_mean_luminance};
+use super::{ImageTerms, Phase, Term, TermContext, mask_mean_luminance};
 use crate::estimate::pose::hypotheses::front_facing;
 
 /// The largest relative gradient error [`TermCheck::passes`] accepts.
@@ -214,6 +214,7 @@ impl Fixture {
         .radiance(&env);
         let image = ImageTerms::new(&self.hits.pixels, rendered, &self.target, &self.weight, self.level)?;
         Ok(f(&TermContext {
+            phase: Phase::Pose,
             tape,
             pose: &pose,
             camera: &self.camera,
@@ -221,6 +222,7 @@ impl Fixture {
             soft_mask: Some(&soft_mask),
             image: Some(image),
             env: Some(&env),
+            lighting: None,
             front_facing: front_facing(&self.camera),
             progress,
             seed: CHECK_SEED,

@@ -116,9 +116,9 @@ pub fn variants(name: &str, threads: usize) -> Result<Vec<Variant>> {
             s.objective = Arc::new(Objective::paper_default().without(&["barycenter", "orientation"]))
         }))],
         "no_light_smoothness" => vec![ablation(Box::new(|s, _| {
-            s.objective = Arc::new(Objective::paper_default().without(&["light_smoothness"]));
+            s.objective = Arc::new(Objective::paper_default().without(&["neighbour_smoothness"]));
             s.lighting.smoothness = 0.0;
-            s.lighting.final_smoothness.weight = 0.0;
+            s.joint.map_smoothness = 0.0;
         }))],
         "joint_rounds" => vec![ablation(Box::new(|s, _| s.joint.rounds = 2))],
         other => {

@@ -1,14 +1,17 @@
 //! The lighting stage at a fixed pose. The rendered image is linear in the
 //! environment map: light samples traced once at the pose record which
 //! texels each pixel reads with which weight ([`render::transport`]), and the
-//! map is the regularised, non-negative least-squares solution
-//! ([`least_squares`]), coarse to fine. What the fit is for sets the pixels'
-//! weights (`LightingPurpose`); the output map's fit leaves out pixels on the
-//! probe's reflectance edges and weighs each by the share of its light the
-//! model follows.
+//! map minimises the lighting terms ([`phase`]): by default the regularised,
+//! non-negative least-squares solution ([`least_squares`]), coarse to fine.
+//! What the fit is for sets the pixels' weights (`LightingPurpose`); the
+//! output map's fit leaves out pixels on the probe's reflectance edges and
+//! weighs each by the share of its light the model follows.
 
 pub mod least_squares;
+pub mod phase;
 
+use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::time::Instant;
 
 use optim::Termination;
@@ -20,15 +23,17 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
-pub use least_squares::{DataTerm, LightingSolve, Solved, pyramid, solve};
+pub use least_squares::{LightingSolve, Solved, pyramid, solve};
+pub use phase::LightingTerms;
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};
 
 use super::Probe;
 use super::photo::{Photo, Pixels, on_probe};
 use super::report::{PhaseReport, resident_mb};
-use super::settings::{LightingSettings, Settings, Smoothness};
+use super::settings::{LightingSettings, Settings};
 use crate::error::{Error, Result};
-use crate::objective::{DARK_FRACTION, mask_mean_luminance};
+use crate::objective::{DARK_FRACTION, DataTerm, mask_mean_luminance};
+use phase::TapeScene;
 
 /// What a lighting fit is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,13 +57,16 @@ pub(super) enum LightingPurpose {
 /// pixels and the data term's targets and weights.
 pub(super) struct LightingFit {
     pub(super) hits: PrimaryHits,
-    pub(super) transport: Transport,
+    pub(super) transport: Arc<Transport>,
     pub(super) env: Vec<f64>,
     pub(super) rendered: Vec<[f64; 3]>,
-    pub(super) data: DataTerm,
+    pub(super) data: Arc<DataTerm>,
     pub(super) evaluations: usize,
     /// Why the (finest level's) solve stopped.
     pub(super) termination: Option<Termination>,
+    /// Each lighting term's value at the map, when asked for
+    /// ([`FitRequest::term_values`]).
+    pub(super) term_values: BTreeMap<String, f64>,
 }
 
 impl LightingFit {
@@ -132,17 +140,26 @@ impl MapSizes {
     }
 }
 
-/// The output map's fit at `pose`: at `Settings::spp_final`, with MIS guided
-/// by the `pilot` map (search size) and started from it, with the final
-/// smoothness. The transport is `LightingSettings::model`'s (by default one
-/// bounce of inter-reflection: a can's lid sees its rim, which reflects the
-/// sky). Returns the fit and its samples per pixel.
+/// What the output map's solve starts from and minimises.
+pub(super) struct OutputSolve<'a> {
+    /// The kept pose's map at the search size: it guides the light samples
+    /// (MIS) and starts the solve.
+    pub(super) pilot: Option<&'a [f64]>,
+    /// The objective's lighting terms.
+    pub(super) terms: &'a LightingTerms,
+}
+
+/// The output map's fit at `pose`: at `Settings::spp_final`, minimising
+/// `output`'s terms from its pilot map. The transport is
+/// `LightingSettings::model`'s (by default one bounce of inter-reflection:
+/// a can's lid sees its rim, which reflects the sky). Returns the fit and
+/// its samples per pixel.
 pub(super) fn final_fit(
     probe: &Probe,
     photo: &Photo,
     clipped: &[bool],
     pose: &Pose,
-    pilot: Option<&[f64]>,
+    OutputSolve { pilot, terms }: OutputSolve,
     sizes: &MapSizes,
     settings: &Settings,
 ) -> Result<(LightingFit, u32)> {
@@ -168,11 +185,12 @@ pub(super) fn final_fit(
             size: sizes.work,
             render,
             sampling,
-            smoothness: settings.lighting.final_smoothness,
+            terms,
             purpose: LightingPurpose::Output,
             pixels: Pixels::All,
             start: start.as_deref(),
             max_iters: settings.lighting.solve_iters,
+            term_values: true,
         },
         &settings.lighting,
     )?;
@@ -187,13 +205,16 @@ pub(super) struct FitRequest<'a> {
     pub(super) render: RenderSettings,
     /// How the light samples pick their directions.
     pub(super) sampling: LightSampling<'a>,
-    pub(super) smoothness: Smoothness,
+    /// What the map minimises.
+    pub(super) terms: &'a LightingTerms,
     pub(super) purpose: LightingPurpose,
     pub(super) pixels: Pixels,
     /// The map to start from (None: coarse to fine from a constant map).
     pub(super) start: Option<&'a [f64]>,
     /// L-BFGS iterations at most (of the finest level).
     pub(super) max_iters: usize,
+    /// Whether to evaluate each term at the solved map (for the report).
+    pub(super) term_values: bool,
 }
 
 /// The lighting at `pose` that `request` asks for: light samples traced,
@@ -210,11 +231,12 @@ pub(super) fn fit_lighting(
         size,
         render: ref settings,
         ref sampling,
-        smoothness,
+        terms,
         purpose,
         pixels,
         start,
         max_iters,
+        term_values,
     } = *request;
     // Light samples in passes: memory stays that of one pass however many
     // samples the transport gathers (with MIS a hit has two).
@@ -226,6 +248,12 @@ pub(super) fn fit_lighting(
     let keep = |p: u32| pixels.keeps(p, camera.width);
     let record = SampleRecord::trace(probe.asset, probe.bsdf, pose, camera, settings, sampling, passes, keep)?;
     let mut data = pixel_targets(photo, &record.hits, clipped, purpose, lighting)?;
+    let scene = TapeScene {
+        photo,
+        pose,
+        pixels: &record.hits.pixels,
+        seed: settings.seed,
+    };
     if purpose == LightingPurpose::Output {
         let r = &record;
         let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());
@@ -240,8 +268,8 @@ pub(super) fn fit_lighting(
             .zip(&shares.followed)
             .for_each(|(w, f)| w.iter_mut().for_each(|w| *w *= f * f));
     }
+    let data = Arc::new(data);
     let solve_settings = LightingSolve {
-        smoothness,
         relative_smoothness: purpose == LightingPurpose::Output,
         floor_of_level: match purpose {
             LightingPurpose::Output => lighting.floor_of_level,
@@ -251,12 +279,13 @@ pub(super) fn fit_lighting(
         max_iters,
         method: lighting.method,
     };
-    let at = |(w, h): (usize, usize)| record.transport(w, h);
-    let (transport, solved) = match start {
+    let at = |(w, h): (usize, usize)| Arc::new(record.transport(w, h));
+    // The finest level's start, which also sets its smoothness's levels.
+    let (transport, solved, finest_start) = match start {
         Some(x0) => {
             let transport = at(size);
-            let solved = solve(&transport, &data, solve_settings, x0)?;
-            (transport, solved)
+            let solved = terms.solve(&transport, &data, solve_settings, x0, &scene)?;
+            (transport, solved, x0.to_vec())
         }
         None => {
             // Coarse to fine from a constant map at the photo's mean level:
@@ -277,7 +306,7 @@ pub(super) fn fit_lighting(
                 termination: None,
             };
             let (mut evaluations, mut previous) = (0, levels[0]);
-            let mut transport = None;
+            let (mut transport, mut finest_start) = (None, Vec::new());
             let finest = *levels.last().expect("at least one level");
             for level in levels {
                 let x0 = resample(&solved.env, previous, level);
@@ -292,11 +321,12 @@ pub(super) fn fit_lighting(
                     },
                     ..solve_settings
                 };
-                (solved, previous, transport) = (solve(&t, &data, level_settings, &x0)?, level, Some(t));
+                let level_solved = terms.solve(&t, &data, level_settings, &x0, &scene)?;
+                (solved, previous, transport, finest_start) = (level_solved, level, Some(t), x0);
                 evaluations += solved.evaluations;
             }
             solved.evaluations = evaluations;
-            (transport.expect("at least one level"), solved)
+            (transport.expect("at least one level"), solved, finest_start)
         }
     };
     let Solved {
@@ -306,6 +336,10 @@ pub(super) fn fit_lighting(
     } = solved;
     let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];
     transport.apply(&env, &mut rendered);
+    let term_values = match term_values {
+        true => terms.values(&transport, &data, solve_settings, &finest_start, &env, &scene)?,
+        false => BTreeMap::new(),
+    };
     Ok(LightingFit {
         hits: record.hits,
         transport,
@@ -314,6 +348,7 @@ pub(super) fn fit_lighting(
         data,
         evaluations,
         termination,
+        term_values,
     })
 }
 
@@ -486,14 +521,19 @@ pub(super) fn psnr(rendered: &[[f64; 3]], data: &DataTerm) -> f64 {
     10.0 * (peak * peak / (se / n as f64)).log10()
 }
 
-/// A lighting solve's account.
+/// A lighting solve's account: its loss the lighting terms' values where
+/// the fit evaluated them, else the data term's weighted squared error.
 pub(super) fn lighting_report(name: &str, fit: &LightingFit, started: Instant) -> PhaseReport {
+    let loss = match fit.term_values.is_empty() {
+        true => [("data_weighted_sq_error".to_string(), fit.weighted_sq_error())].into(),
+        false => fit.term_values.clone(),
+    };
     PhaseReport {
         name: name.into(),
         iterations: 0,
         evaluations: fit.evaluations,
         wall_s: started.elapsed().as_secs_f64(),
-        loss: [("data_weighted_sq_error".to_string(), fit.weighted_sq_error())].into(),
+        loss,
         per_iteration: Vec::new(),
         psnr_db: Some(fit.psnr_db()),
         pose: None,

@@ -18,11 +18,11 @@ use super::hypotheses;
 use crate::error::Result;
 use crate::estimate::Probe;
 use crate::estimate::lighting::{
-    FitRequest, LightingFit, LightingPurpose, env_from_texels, fit_lighting, lighting_report,
+    FitRequest, LightingFit, LightingPurpose, LightingTerms, env_from_texels, fit_lighting, lighting_report,
 };
 use crate::estimate::photo::{Photo, Pixels};
 use crate::estimate::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
-use crate::estimate::settings::{Settings, Smoothness};
+use crate::estimate::settings::Settings;
 
 /// The lean (degrees) that maximises `score` within `reach` either way,
 /// by a line search: leans of 0 and of `step` either way; while one side
@@ -238,6 +238,7 @@ impl PhotoJudge<'_> {
         max_iters: usize,
     ) -> Result<LightingFit> {
         let lighting = &self.settings.lighting;
+        let terms = LightingTerms::quadratic(lighting.smoothness, lighting.method)?;
         let request = FitRequest {
             size: self.work,
             render: RenderSettings {
@@ -245,11 +246,12 @@ impl PhotoJudge<'_> {
                 seed: self.settings.seed.wrapping_add(seed_offset),
             },
             sampling,
-            smoothness: Smoothness::quadratic(lighting.smoothness),
+            terms: &terms,
             purpose: LightingPurpose::Output,
             pixels,
             start,
             max_iters,
+            term_values: false,
         };
         fit_lighting(self.probe, self.photo, self.clipped, pose, &request, lighting)
     }
@@ -565,11 +567,13 @@ mod tests {
                 size: work,
                 render: RenderSettings { spp: 16, seed: 78 },
                 sampling: settings.lighting.model.sampling(None),
-                smoothness: Smoothness::quadratic(settings.lighting.smoothness),
+                terms: &LightingTerms::quadratic(settings.lighting.smoothness, settings.lighting.method)
+                    .expect("valid terms"),
                 purpose: LightingPurpose::Output,
                 pixels: Pixels::All,
                 start: None,
                 max_iters: settings.lighting.solve_iters,
+                term_values: false,
             },
             &settings.lighting,
         )

@@ -25,11 +25,11 @@ use super::silhouette::{
 use crate::error::{Error, Result};
 use crate::estimate::Probe;
 use crate::estimate::lighting::{
-    FitRequest, LightingFit, LightingPurpose, env_from_texels, fit_lighting, lighting_report,
+    FitRequest, LightingFit, LightingPurpose, LightingTerms, env_from_texels, fit_lighting, lighting_report,
 };
 use crate::estimate::photo::{Photo, Pixels};
 use crate::estimate::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
-use crate::estimate::settings::{OrientationSettings, Settings, Smoothness};
+use crate::estimate::settings::{OrientationSettings, Settings};
 use crate::objective::mask_mean_luminance;
 
 /// What the pose search found: the pose, every axis hypothesis's and
@@ -454,6 +454,7 @@ impl Ranker<'_> {
             (turned, loss, None)
         };
         let t1 = Instant::now();
+        let terms = LightingTerms::quadratic(o.ranking_smoothness, settings.lighting.method)?;
         let coarse = fit_lighting(
             ctx.probe,
             ctx.photo,
@@ -466,11 +467,12 @@ impl Ranker<'_> {
                     seed: settings.seed,
                 },
                 sampling: LightSampling::BSDF,
-                smoothness: Smoothness::quadratic(o.ranking_smoothness),
+                terms: &terms,
                 purpose: LightingPurpose::Search,
                 pixels: Pixels::All,
                 start: None,
                 max_iters: settings.lighting.solve_iters,
+                term_values: false,
             },
             &settings.lighting,
         )?;
@@ -520,9 +522,8 @@ fn polish(
 
 /// `JointSettings::rounds` of the pose by Adam on the whole objective under
 /// the map solved at the pose so far (at `work`), each followed by the map
-/// at the new pose but the last (the output's own solve follows). The
-/// objective's smoothness weight is the map's: a detailed map would explain
-/// a misplaced texture away and hide the pose error from the image loss.
+/// at the new pose but the last (the output's own solve follows), at
+/// `JointSettings::map_smoothness`.
 fn joint_rounds(
     ctx: &PoseContext,
     mut pose: Pose,
@@ -533,7 +534,7 @@ fn joint_rounds(
     if settings.joint.rounds == 0 {
         return Ok(pose);
     }
-    let search_smoothness = settings.objective.smoothness_weight(1.0).unwrap_or(0.0);
+    let terms = LightingTerms::quadratic(settings.joint.map_smoothness, settings.lighting.method)?;
     let depth = (pose.translation - ctx.photo.camera.origin).length();
     // The search-resolution map, from `start` (or from scratch), reported.
     let search_lighting = |pose: &Pose, start: Option<&[f64]>, phases: &mut PhaseLog| -> Result<LightingFit> {
@@ -550,11 +551,12 @@ fn joint_rounds(
                     seed: settings.seed,
                 },
                 sampling: LightSampling::BSDF,
-                smoothness: Smoothness::quadratic(search_smoothness),
+                terms: &terms,
                 purpose: LightingPurpose::Search,
                 pixels: Pixels::All,
                 start,
                 max_iters: settings.lighting.solve_iters,
+                term_values: false,
             },
             &settings.lighting,
         )?;

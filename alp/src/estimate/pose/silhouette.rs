@@ -25,7 +25,7 @@ use crate::estimate::Probe;
 use crate::estimate::photo::{Photo, usable_pixel};
 use crate::estimate::report::{PhaseReport, PoseRecord, resident_mb};
 use crate::estimate::settings::{OutlineSettings, Settings};
-use crate::objective::{Evaluation, ImageTerms, Objective, TermContext, TermReport};
+use crate::objective::{Evaluation, ImageTerms, Objective, Phase, TermContext, TermReport};
 
 /// What one evaluation of the objective during a pose phase sees besides
 /// the pose: the photo, its prepared mask and the phase's progress.
@@ -65,6 +65,7 @@ impl PoseContext<'_> {
         )?;
         let soft = plan.soft_mask(&posed);
         self.objective.evaluate(&TermContext {
+            phase: Phase::Pose,
             tape,
             pose: pose_vars,
             camera: &self.photo.camera,
@@ -72,6 +73,7 @@ impl PoseContext<'_> {
             soft_mask: Some(&soft),
             image,
             env: None,
+            lighting: None,
             front_facing: self.front_facing,
             progress,
             seed,

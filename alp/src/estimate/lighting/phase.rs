@@ -1,0 +1,409 @@
+//! The lighting phase: an objective's lighting terms minimised over the map
+//! at a fixed pose. When every term has a form the exact least-squares
+//! solve covers (the weighted data term and at most one neighbour
+//! smoothness), the declaration compiles to that solve; otherwise, or when
+//! asked ([`LightingMethod::Tape`]), each evaluation records the terms on a
+//! tape -- the map a leaf, the pixels the transport applied to it
+//! ([`TransportOp`]) -- and the same bounded, preconditioned L-BFGS
+//! minimises them.
+//!
+//! The output map's solve minimises the estimate's objective; the pose
+//! searches' solves are instruments of the search, a data term and a
+//! quadratic smoothness of their own weight ([`LightingTerms::quadratic`]).
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use autodiff::Tape;
+use render::lookup::ImageVars;
+use render::pose::Pose;
+use render::posed::{PoseVars, pack_pose};
+use render::silhouette::ReferenceMask;
+use render::transport::{Transport, TransportOp};
+
+use super::least_squares::{LightingSolve, Solved, minimise, solve};
+use crate::error::{Error, Result};
+use crate::estimate::photo::Photo;
+use crate::estimate::pose::hypotheses::front_facing;
+use crate::estimate::settings::LightingMethod;
+use crate::objective::{
+    DataTerm, ImageTerms, LeastSquaresData, LeastSquaresForm, LightingInputs, NeighbourSmoothness, Objective, Phase,
+    PriorBasis, Smoothness, TermContext, Weighting, mask_mean_luminance,
+};
+
+/// The progress at which the lighting phase reads its terms' weights: it
+/// runs once the pose is found.
+const LIGHTING_PROGRESS: f64 = 1.0;
+
+/// Unknowns whose known curvature is below this fraction of the mean are
+/// preconditioned as if at it: a term without a least-squares form tells
+/// the solve nothing of its curvature.
+const CURVATURE_FLOOR: f64 = 1e-3;
+
+/// How the terms are minimised.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Plan {
+    /// The exact least-squares solve with this smoothness (the data term's
+    /// weight divided out).
+    Exact(Smoothness),
+    /// The terms on a tape.
+    Tape,
+}
+
+/// An objective's lighting terms, compiled.
+pub struct LightingTerms {
+    objective: Arc<Objective>,
+    plan: Plan,
+}
+
+/// What the terms on a tape read besides the map: the photo, the pose and
+/// the pixels the transport renders.
+pub(in crate::estimate) struct TapeScene<'a> {
+    pub(in crate::estimate) photo: &'a Photo,
+    pub(in crate::estimate) pose: &'a Pose,
+    pub(in crate::estimate) pixels: &'a [u32],
+    pub(in crate::estimate) seed: u64,
+}
+
+impl LightingTerms {
+    /// The lighting terms of `objective`: compiled to the exact solve when
+    /// each has a least-squares form, the data term is there once at a
+    /// positive weight and the smoothness at most once, and `method` is not
+    /// [`LightingMethod::Tape`]. Fails when the objective is invalid or
+    /// declares no lighting term (the map would be unconstrained).
+    pub fn compile(objective: Arc<Objective>, method: LightingMethod) -> Result<Self> {
+        objective.validate()?;
+        if objective.terms_in(Phase::Lighting).next().is_none() {
+            return Err(Error::invalid(
+                "objective",
+                "declares no term for the lighting phase: the map would be unconstrained \
+                 (the default's are data_least_squares and neighbour_smoothness)",
+            ));
+        }
+        let plan = match method {
+            LightingMethod::Tape => Plan::Tape,
+            _ => exact_plan(&objective).map_or(Plan::Tape, Plan::Exact),
+        };
+        Ok(LightingTerms { objective, plan })
+    }
+
+    /// A pose search's instrument: the data term and a quadratic
+    /// smoothness of `weight`.
+    pub fn quadratic(weight: f64, method: LightingMethod) -> Result<Self> {
+        let objective = Objective::new()
+            .term(LeastSquaresData)
+            .term(NeighbourSmoothness::quadratic().weight(weight));
+        Self::compile(Arc::new(objective), method)
+    }
+
+    /// Whether the terms compiled to the exact solve.
+    pub fn is_exact(&self) -> bool {
+        matches!(self.plan, Plan::Exact(_))
+    }
+
+    /// The map minimising the terms over `transport` from `x0` with the
+    /// data term `data` and the bounds and budget of `settings`.
+    pub(in crate::estimate) fn solve(
+        &self,
+        transport: &Arc<Transport>,
+        data: &Arc<DataTerm>,
+        settings: LightingSolve,
+        x0: &[f64],
+        scene: &TapeScene,
+    ) -> Result<Solved> {
+        match &self.plan {
+            Plan::Exact(smoothness) => solve(transport, data, smoothness, settings, x0),
+            Plan::Tape => self.solve_on_tape(transport, data, settings, x0, scene),
+        }
+    }
+
+    /// Each lighting term's unweighted value at the map `env`, solved
+    /// from `start`.
+    pub(in crate::estimate) fn values(
+        &self,
+        transport: &Arc<Transport>,
+        data: &Arc<DataTerm>,
+        settings: LightingSolve,
+        start: &[f64],
+        env: &[f64],
+        scene: &TapeScene,
+    ) -> Result<BTreeMap<String, f64>> {
+        let recorder = Recorder::new(self, transport, data, settings, start, scene)?;
+        let tape = Tape::new();
+        Ok(recorder.record(&tape, env)?.1.values())
+    }
+
+    fn solve_on_tape(
+        &self,
+        transport: &Arc<Transport>,
+        data: &Arc<DataTerm>,
+        settings: LightingSolve,
+        x0: &[f64],
+        scene: &TapeScene,
+    ) -> Result<Solved> {
+        let recorder = Recorder::new(self, transport, data, settings, x0, scene)?;
+        let curvature = recorder.curvature();
+        let mut failure = None;
+        let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
+            let tape = Tape::new();
+            match recorder.record(&tape, x) {
+                Ok((env, evaluation)) => {
+                    tape.backward(evaluation.total);
+                    g.copy_from_slice(&tape.grad(env));
+                    tape.item(evaluation.total)
+                }
+                Err(e) => {
+                    failure.get_or_insert(e);
+                    g.fill(0.0);
+                    f64::NAN
+                }
+            }
+        };
+        let solved = minimise(&mut objective, &curvature, &recorder.inputs.basis, settings, x0)?;
+        match failure {
+            Some(e) => Err(e),
+            None => Ok(solved),
+        }
+    }
+}
+
+/// The exact solve's smoothness when every lighting term of non-zero
+/// weight has a form it covers: the data term once, the smoothness at most
+/// once (its weight over the data's).
+fn exact_plan(objective: &Objective) -> Option<Smoothness> {
+    let (mut data, mut smoothness) = (None, None);
+    for t in objective.terms_in(Phase::Lighting) {
+        let weight = t.weight().at(LIGHTING_PROGRESS);
+        // A term at weight 0 is left out of the total (Objective::evaluate).
+        if weight == 0.0 {
+            continue;
+        }
+        match t.term().least_squares_form()? {
+            LeastSquaresForm::Data if data.is_none() && weight > 0.0 => data = Some(weight),
+            LeastSquaresForm::Smoothness(s) if smoothness.is_none() => smoothness = Some((s, weight)),
+            _ => return None,
+        }
+    }
+    let data = data?;
+    Some(match smoothness {
+        Some((shape, weight)) => shape.at_weight(weight / data),
+        None => Smoothness::quadratic(0.0),
+    })
+}
+
+/// Records the lighting terms at a map on a tape.
+struct Recorder<'a> {
+    terms: &'a LightingTerms,
+    op: Arc<TransportOp>,
+    inputs: LightingInputs,
+    scene: &'a TapeScene<'a>,
+    reference: ReferenceMask,
+    weight: Vec<f64>,
+    level: f64,
+    pose: [f64; render::posed::POSE_PARAMS],
+    size: (usize, usize),
+}
+
+impl<'a> Recorder<'a> {
+    fn new(
+        terms: &'a LightingTerms,
+        transport: &Arc<Transport>,
+        data: &Arc<DataTerm>,
+        settings: LightingSolve,
+        start: &[f64],
+        scene: &'a TapeScene<'a>,
+    ) -> Result<Self> {
+        let basis = PriorBasis::new(
+            transport,
+            data,
+            start,
+            settings.relative_smoothness,
+            settings.clipped_light_share,
+        );
+        let photo = scene.photo;
+        Ok(Recorder {
+            terms,
+            op: Arc::new(TransportOp::new(transport.clone())),
+            inputs: LightingInputs {
+                data: data.clone(),
+                basis,
+            },
+            scene,
+            reference: ReferenceMask::new(&photo.mask)?,
+            weight: (0..data.target.len()).map(|p| data.used(p) as u8 as f64).collect(),
+            level: mask_mean_luminance(&photo.image, &photo.mask)?,
+            pose: pack_pose(scene.pose),
+            size: (transport.width, transport.height),
+        })
+    }
+
+    /// The preconditioner's curvature per unknown: the data term's and the
+    /// neighbour smoothness terms', at least a small share of their mean.
+    fn curvature(&self) -> Vec<f64> {
+        let basis = &self.inputs.basis;
+        let texels = self.size.0 * self.size.1;
+        let mut prior = vec![0.0; texels];
+        for t in self.terms.objective.terms_in(Phase::Lighting) {
+            if let Some(LeastSquaresForm::Smoothness(shape)) = t.term().least_squares_form() {
+                let weight = t.weight().at(LIGHTING_PROGRESS);
+                let curvature = basis.prior(&shape.at_weight(weight)).texel_curvature(texels);
+                prior.iter_mut().zip(curvature).for_each(|(a, b)| *a += b);
+            }
+        }
+        let known: Vec<f64> = (basis.data_curvature.iter().enumerate())
+            .map(|(k, d)| d + prior[k / 3])
+            .collect();
+        let least = CURVATURE_FLOOR * known.iter().sum::<f64>() / known.len().max(1) as f64;
+        known.into_iter().map(|h| h.max(least)).collect()
+    }
+
+    /// The lighting terms at the map `x` on `tape`: the map's leaf and the
+    /// evaluation.
+    fn record<'t>(
+        &self,
+        tape: &'t Tape<f64>,
+        x: &[f64],
+    ) -> Result<(autodiff::Var<'t, f64>, crate::objective::Evaluation<'t>)> {
+        let env = tape.leaf(x);
+        let rendered = self.op.render(tape, env);
+        let data = &self.inputs.data;
+        let image = ImageTerms::new(self.scene.pixels, rendered, &data.target, &self.weight, self.level)?;
+        let pose = PoseVars::new(tape, &self.pose, false);
+        let map = ImageVars::from_texels(env, self.size.0, self.size.1);
+        let camera = &self.scene.photo.camera;
+        let evaluation = self.terms.objective.evaluate(&TermContext {
+            phase: Phase::Lighting,
+            tape,
+            pose: &pose,
+            camera,
+            reference: &self.reference,
+            soft_mask: None,
+            image: Some(image),
+            env: Some(&map),
+            lighting: Some(&self.inputs),
+            front_facing: front_facing(camera),
+            progress: LIGHTING_PROGRESS,
+            seed: self.scene.seed,
+        })?;
+        Ok((env, evaluation))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Vec2, Vec3};
+    use render::camera::Camera;
+    use render::image_io::{Mask, RgbImage};
+
+    use super::*;
+    use crate::objective::{LightSmoothness, RgbL1};
+
+    /// A photo of `w x h` pixels (all the probe's), its pixel `p` reading
+    /// its texel and 40 % of the next one's on an 8 x 4 map whose truth
+    /// has a bright band; one pixel clipped, every pixel an 8-bit value.
+    fn scene() -> (Photo, Arc<Transport>, Arc<DataTerm>, Vec<f64>) {
+        let (w, h) = (8, 4);
+        let n = w * h;
+        let centre = |t: usize| Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32);
+        let uv: Vec<Vec2> = (0..2 * n).map(|k| centre((k / 2 + k % 2) % n)).collect();
+        let segment: Vec<u32> = (0..2 * n as u32).map(|k| k / 2).collect();
+        let throughput: Vec<[f32; 3]> = (0..2 * n).map(|k| [1.0 - 0.6 * (k % 2) as f32, 0.8, 0.6]).collect();
+        let transport = Arc::new(Transport::new(&segment, &uv, &throughput, n, w, h));
+        let truth: Vec<f64> = (0..n * 3)
+            .map(|i| {
+                if (2..4).contains(&(i / 3 % w)) {
+                    6.0
+                } else {
+                    0.5 + 0.1 * (i % 5) as f64
+                }
+            })
+            .collect();
+        let mut target = vec![[0.0; 3]; n];
+        transport.apply(&truth, &mut target);
+        let weight = target.iter().map(|t| t.map(|v| 1.0 / (v + 0.1).powi(2))).collect();
+        let mut data = DataTerm::exact(target.clone(), weight);
+        data.at_least[10] = true;
+        data.tolerance.iter_mut().for_each(|t| *t = [0.004; 3]);
+        let pixels = target.iter().map(|t| t.map(|v| v as f32)).collect();
+        let camera = Camera::new(w as u32, h as u32, 40.0, Vec3::Z, Vec3::ZERO, Vec3::Y).expect("a camera");
+        let photo = Photo::new(RgbImage::new(w, h, pixels), Mask::new(w, h, vec![true; n]), camera).expect("a photo");
+        (photo, transport, Arc::new(data), vec![1.0; n * 3])
+    }
+
+    fn solve_with(terms: &LightingTerms) -> Vec<f64> {
+        let (photo, transport, data, x0) = scene();
+        let pixels: Vec<u32> = (0..data.target.len() as u32).collect();
+        let settings = LightingSolve {
+            relative_smoothness: true,
+            floor_of_level: 0.02,
+            clipped_light_share: 0.5,
+            max_iters: 2000,
+            method: LightingMethod::LeastSquares,
+        };
+        let scene = TapeScene {
+            photo: &photo,
+            pose: &Pose::IDENTITY,
+            pixels: &pixels,
+            seed: 5,
+        };
+        terms
+            .solve(&transport, &data, settings, &x0, &scene)
+            .expect("a solve")
+            .env
+    }
+
+    #[test]
+    fn the_default_terms_compile_to_the_exact_solve_and_the_tape_finds_the_same_map() {
+        let objective = Arc::new(Objective::paper_default());
+        let exact = LightingTerms::compile(objective.clone(), LightingMethod::LeastSquares).expect("terms");
+        let tape = LightingTerms::compile(objective, LightingMethod::Tape).expect("terms");
+        assert!(exact.is_exact() && !tape.is_exact());
+        let (a, b) = (solve_with(&exact), solve_with(&tape));
+        let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!((x - y).abs() < 1e-4 * scale, "unknown {k}: exact {x}, tape {y}");
+        }
+        // The quadratic instrument too, its weight over the data's.
+        let quadratic = |method| LightingTerms::quadratic(0.3, method).expect("terms");
+        let (a, b) = (
+            solve_with(&quadratic(LightingMethod::LeastSquares)),
+            solve_with(&quadratic(LightingMethod::Tape)),
+        );
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() < 1e-4 * scale, "quadratic: exact {x}, tape {y}");
+        }
+    }
+
+    #[test]
+    fn a_term_outside_the_exact_form_is_minimised_on_the_tape_and_changes_the_map() {
+        let with = |term| Arc::new(Objective::paper_default().term(term));
+        let default = Arc::new(Objective::paper_default());
+        let default = solve_with(&LightingTerms::compile(default, LightingMethod::LeastSquares).unwrap());
+        for objective in [
+            with(LightSmoothness::new(10.0).weight(0.5)),
+            with(RgbL1::log().weight(0.5).in_phases(crate::objective::Phases::LIGHTING)),
+        ] {
+            let terms = LightingTerms::compile(objective.clone(), LightingMethod::LeastSquares).expect("terms");
+            assert!(!terms.is_exact(), "{objective:?}");
+            let map = solve_with(&terms);
+            let moved = map.iter().zip(&default).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(moved > 1e-3, "{objective:?}: the map moved {moved}");
+        }
+        // A second smoothness: the exact solve covers one, the tape both.
+        let twice = Objective::paper_default().term(NeighbourSmoothness::quadratic().weight(0.1));
+        assert!(
+            !LightingTerms::compile(Arc::new(twice), LightingMethod::LeastSquares)
+                .unwrap()
+                .is_exact()
+        );
+    }
+
+    #[test]
+    fn an_objective_without_lighting_terms_is_an_error() {
+        let pose_only = Objective::paper_default().without(&["data_least_squares", "neighbour_smoothness"]);
+        let e = LightingTerms::compile(Arc::new(pose_only), LightingMethod::LeastSquares)
+            .err()
+            .expect("an error");
+        assert!(e.to_string().contains("no term for the lighting phase"), "{e}");
+    }
+}
