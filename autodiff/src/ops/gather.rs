@@ -61,11 +61,16 @@ pub(crate) fn forward_tile<'a, T: Real>(
     // Taken before the loop, not counted in it: with the count known up
     // front the compiler keeps the gather loop below free of extra work.
     let count = members.len();
+    // The members share the indices: one check against the least count.
+    let mut least = usize::MAX;
     for ((stride, offset, y), member) in members.zip(&mut group) {
         let at = Strided::new(stride, offset, source.len());
-        check_indices(idx, at.count, "gather");
+        least = least.min(at.count);
         debug_assert_eq!(y.len(), idx.len());
         *member = (at.stride, at.offset, y);
+    }
+    if count > 0 {
+        check_indices(idx, least, "gather");
     }
     // SAFETY: indices checked above; every output holds the tile's elements.
     unsafe { T::gather_unchecked(source, idx, &mut group[..count]) };
@@ -82,15 +87,31 @@ pub(crate) fn backward_tile<'a, T: Real>(
 ) {
     let mut group: [(&[T], &[T], Strided); GROUP] = [(&[], &[], Strided::UNIT); GROUP];
     let mut count = 0;
+    // Consecutive members at the same indices (a texel's channels) are
+    // checked once, against the least of their counts.
+    let mut unchecked: Option<(&[T], usize)> = None;
     for (stride, offset, idx, gy) in members {
         let at = Strided::new(stride, offset, gx.len());
-        check_indices(idx, at.count, "gather");
+        unchecked = match unchecked {
+            Some((pending, least)) if std::ptr::eq(pending, idx) => Some((pending, least.min(at.count))),
+            Some((pending, least)) => {
+                check_indices(pending, least, "gather");
+                Some((idx, at.count))
+            }
+            None => Some((idx, at.count)),
+        };
         group[count] = (idx, gy, at);
         count += 1;
         if count == GROUP {
+            if let Some((pending, least)) = unchecked.take() {
+                check_indices(pending, least, "gather");
+            }
             scatter_group(gx, &group[..count], n);
             count = 0;
         }
+    }
+    if let Some((pending, least)) = unchecked {
+        check_indices(pending, least, "gather");
     }
     scatter_group(gx, &group[..count], n);
 }
