@@ -397,10 +397,7 @@ impl Transport {
         let texels = self.width * self.height;
         scratch.env.clear();
         scratch.env.extend(padded(env));
-        scratch.sums.clear();
-        scratch
-            .sums
-            .resize(self.pixels.div_ceil(PIXEL_CHUNK) * texels, [0.0; 4]);
+        self.clear_chunk_sums(&mut scratch.sums);
         let env = &scratch.env;
         scratch
             .sums
@@ -410,13 +407,7 @@ impl Transport {
             .for_each(|(chunk, (sums, rendered))| {
                 for (p, px) in pixel_chunk(chunk, self.pixels).zip(rendered) {
                     *px = self.render_pixel(p, env);
-                    let quantum = self.quantum[p] as f64;
-                    let r = residual(p, *px).map(|r| r * quantum);
-                    let r = F64x4::load(&[r[0], r[1], r[2], 0.0]);
-                    for e in self.row(p) {
-                        let sum = &mut sums[e.index()];
-                        (F64x4::load(sum) + F64x4::from_entry(e) * r).store(sum);
-                    }
+                    self.pull_back_pixel(p, residual(p, *px), sums);
                 }
             });
         add_chunk_sums(&scratch.sums, texels, grad);
@@ -425,14 +416,45 @@ impl Transport {
     /// `grad += A^T r`: the pixels' RGB `r` (one per pixel) pulled back
     /// onto the map's texels (texel-major RGB), the transport's adjoint.
     pub fn pull_back(&self, r: &[[f64; 3]], grad: &mut [f64]) {
+        self.pull_back_with(r, grad, &mut PullBackScratch::default());
+    }
+
+    /// [`pull_back`](Self::pull_back) summing per chunk of pixels into
+    /// `scratch` (reused from call to call, as by
+    /// [`apply_and_pull_back`](Self::apply_and_pull_back)).
+    pub fn pull_back_with(&self, r: &[[f64; 3]], grad: &mut [f64], scratch: &mut PullBackScratch) {
         assert_eq!(r.len(), self.pixels, "Transport::pull_back: one RGB value a pixel");
         assert_eq!(
             grad.len(),
             self.unknowns(),
             "Transport::pull_back: one gradient a texel channel"
         );
-        let sums = self.texel_sums(|p, w| std::array::from_fn(|c| w[c] * r[p][c]));
-        grad.iter_mut().zip(sums).for_each(|(g, s)| *g += s);
+        let texels = self.width * self.height;
+        self.clear_chunk_sums(&mut scratch.sums);
+        scratch.sums.par_chunks_mut(texels).enumerate().for_each(|(chunk, sums)| {
+            for p in pixel_chunk(chunk, self.pixels) {
+                self.pull_back_pixel(p, r[p], sums);
+            }
+        });
+        add_chunk_sums(&scratch.sums, texels, grad);
+    }
+
+    /// Zeroed sums per chunk of pixels and texel, four lanes each.
+    fn clear_chunk_sums(&self, sums: &mut Vec<[f64; 4]>) {
+        sums.clear();
+        sums.resize(self.pixels.div_ceil(PIXEL_CHUNK) * self.width * self.height, [0.0; 4]);
+    }
+
+    /// Adds pixel `p`'s row times its RGB `r` into its chunk's `sums`.
+    #[inline]
+    fn pull_back_pixel(&self, p: usize, r: [f64; 3], sums: &mut [[f64; 4]]) {
+        let quantum = self.quantum[p] as f64;
+        let r = r.map(|r| r * quantum);
+        let r = F64x4::load(&[r[0], r[1], r[2], 0.0]);
+        for e in self.row(p) {
+            let sum = &mut sums[e.index()];
+            (F64x4::load(sum) + F64x4::from_entry(e) * r).store(sum);
+        }
     }
 
     /// Per texel and channel (texel-major RGB), the sum over the entries

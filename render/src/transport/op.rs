@@ -4,23 +4,29 @@
 //! differentiated through the light transport at a fixed pose, without a
 //! render per evaluation.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use autodiff::{CustomOp, Tape, Var};
 
-use super::Transport;
+use super::{PullBackScratch, Transport};
 
 /// `A env` on the tape: the input is the map (texel-major RGB, as
 /// [`crate::lookup::ImageVars`] holds it), the output the pixels' radiance,
 /// channel-planar (all red, then green, then blue).
 pub struct TransportOp {
     transport: Arc<Transport>,
+    /// The pixels' RGB and the pull-back's sums, reused from call to call
+    /// (a solve evaluates the op a few hundred times).
+    scratch: Mutex<(Vec<[f64; 3]>, PullBackScratch)>,
 }
 
 impl TransportOp {
     /// The op of `transport`.
     pub fn new(transport: Arc<Transport>) -> Self {
-        TransportOp { transport }
+        TransportOp {
+            transport,
+            scratch: Mutex::default(),
+        }
     }
 
     /// The pixels' radiance (one array a channel, in the transport's pixel
@@ -49,8 +55,10 @@ impl CustomOp<f64> for TransportOp {
 
     fn forward(&self, inputs: &[&[f64]], output: &mut [f64]) {
         let pixels = self.transport.pixels;
-        let mut rendered = vec![[0.0; 3]; pixels];
-        self.transport.apply(inputs[0], &mut rendered);
+        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let rendered = &mut scratch.0;
+        rendered.resize(pixels, [0.0; 3]);
+        self.transport.apply(inputs[0], rendered);
         for (p, rgb) in rendered.iter().enumerate() {
             (0..3).for_each(|c| output[c * pixels + p] = rgb[c]);
         }
@@ -61,10 +69,11 @@ impl CustomOp<f64> for TransportOp {
             return;
         };
         let pixels = self.transport.pixels;
-        let r: Vec<[f64; 3]> = (0..pixels)
-            .map(|p| std::array::from_fn(|c| grad_output[c * pixels + p]))
-            .collect();
-        self.transport.pull_back(&r, grad_env);
+        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let (r, sums) = &mut *scratch;
+        r.clear();
+        r.extend((0..pixels).map(|p| std::array::from_fn(|c| grad_output[c * pixels + p])));
+        self.transport.pull_back_with(r, grad_env, sums);
     }
 }
 
