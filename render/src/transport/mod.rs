@@ -431,11 +431,15 @@ impl Transport {
         );
         let texels = self.width * self.height;
         self.clear_chunk_sums(&mut scratch.sums);
-        scratch.sums.par_chunks_mut(texels).enumerate().for_each(|(chunk, sums)| {
-            for p in pixel_chunk(chunk, self.pixels) {
-                self.pull_back_pixel(p, r[p], sums);
-            }
-        });
+        scratch
+            .sums
+            .par_chunks_mut(texels)
+            .enumerate()
+            .for_each(|(chunk, sums)| {
+                for p in pixel_chunk(chunk, self.pixels) {
+                    self.pull_back_pixel(p, r[p], sums);
+                }
+            });
         add_chunk_sums(&scratch.sums, texels, grad);
     }
 
