@@ -21,9 +21,13 @@ use crate::error::{Error, Result};
 /// no error; 0 for linear HDR).
 #[derive(Clone, Debug, Default)]
 pub struct DataTerm {
+    /// The photo's radiance per data pixel.
     pub target: Vec<[f64; 3]>,
+    /// Each pixel's weight per channel (0: left out).
     pub weight: Vec<[f64; 3]>,
+    /// Whether the pixel's target is a lower bound (clipped).
     pub at_least: Vec<bool>,
+    /// Per channel, the half-width of the radiance interval the stored value stands for.
     pub tolerance: Vec<[f64; 3]>,
 }
 

@@ -152,10 +152,13 @@ impl Term for NeighbourSmoothness {
 /// the data's scale, its curvature per unknown and the texels free of the
 /// prior.
 pub struct PriorBasis {
+    /// The map's columns.
     pub width: usize,
+    /// The map's rows.
     pub height: usize,
     /// The start's luminance per texel.
     pub level: Vec<f64>,
+    /// The mean of `level`.
     pub mean_level: f64,
     /// Whether differences count relative to the local level.
     pub relative: bool,
@@ -249,7 +252,9 @@ impl PriorBasis {
 /// What the lighting phase's terms read besides the map: the photo's data
 /// term and the solve's [`PriorBasis`].
 pub struct LightingInputs {
+    /// The photo's pixels as the solve weighs them.
     pub data: Arc<DataTerm>,
+    /// What the smoothness is built on.
     pub basis: PriorBasis,
 }
 
@@ -284,9 +289,13 @@ pub fn clipped_lights(transport: &Transport, data: &DataTerm, column_norms: &[f6
 /// Two neighbouring texels, the area weight of their difference, the
 /// factor that makes it relative to their local level, and its edge.
 pub struct Pair {
+    /// The first texel.
     pub i: usize,
+    /// Its neighbour (right or below).
     pub j: usize,
+    /// sin(theta) of the pair's row: the texels' solid angle.
     pub area: f64,
+    /// The factor that makes the difference relative to the local level.
     pub relative: f64,
     /// The squared difference (of the pair's relative difference) past
     /// which the penalty turns linear; 0: quadratic.
@@ -295,7 +304,9 @@ pub struct Pair {
 
 /// The smoothness prior over an env map's neighbour pairs.
 pub struct Prior {
+    /// Every neighbour pair the prior holds.
     pub pairs: Vec<Pair>,
+    /// The prior's weight over the data's scale and the texel count.
     pub lambda: f64,
     /// The weight of a difference's chromatic part ([`Smoothness::chroma`]).
     pub chroma: f64,
