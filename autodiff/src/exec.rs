@@ -24,17 +24,22 @@
 //! whole arrays.
 //!
 //! What each op computes, forward and backward, lives in its file under
-//! `ops`; the executor decides where and in which order those kernels run.
-//! This file drives the steps (forward, the reverse sweep, plain steps);
-//! `plan` forms the regions and their instructions; `tiles` runs a region's
-//! tiles and chunks.
+//! `kernels`; the executor decides where and in which order those kernels
+//! run, over the program the tape recorded (`graph`: the nodes, their kinds
+//! and buffers). This file drives the steps (forward, the reverse sweep,
+//! plain steps); `plan` forms the regions and their instructions; `tiles`
+//! runs a region's tiles and chunks. It knows neither the tape nor the ops'
+//! constructors.
 
+mod graph;
 mod plan;
 mod tiles;
 
-use crate::ops::{add_into, concat, custom, slice};
+pub use graph::NonFinite;
+pub(crate) use graph::{Graph, NONE, Node, Op, Pool};
+
+use crate::kernels::{add_into, concat, custom, slice};
 use crate::real::Real;
-use crate::tape::{Graph, NONE, Node, NonFinite, Op};
 use plan::{Instr, Region};
 use tiles::{Chunk, Pass, Ptr};
 

@@ -23,12 +23,14 @@
 
 mod exec;
 pub mod gradcheck;
+mod kernels;
 mod ops;
 pub mod real;
 mod tape;
 mod vec3;
 
-pub use ops::custom::{CustomOp, MAX_INPUTS};
+pub use exec::NonFinite;
+pub use kernels::custom::{CustomOp, MAX_INPUTS};
 pub use real::Real;
-pub use tape::{Mark, NonFinite, Tape, Var, VarId};
+pub use tape::{Mark, Tape, Var, VarId};
 pub use vec3::{Quat, Vec3};

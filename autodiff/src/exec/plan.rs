@@ -13,9 +13,9 @@
 use std::ops::Range;
 
 use super::{Executor, Step};
-use crate::ops::gather;
+use super::{Graph, NONE, Node, Op};
+use crate::kernels::gather;
 use crate::real::Real;
-use crate::tape::{Graph, NONE, Node, Op};
 
 /// Regions whose values total at most this many elements keep them all
 /// (no recomputation in the backward pass).

@@ -3,7 +3,7 @@
 //!
 //! Each tile runs the region's instructions in order (forward) and their
 //! vector-Jacobian products in reverse (backward), calling the ops' own tile
-//! kernels (`ops::map`, `ops::sum`, `ops::gather`, `ops::scatter_add`) on
+//! kernels (`kernels::map`, `sum`, `gather`, `scatter_add`) on
 //! slices that this file resolves: tile slots, tile ranges of full-length
 //! buffers, broadcast scalars, and the accumulators that chunk 0 shares
 //! with the real buffers and the other chunks keep private.
@@ -14,9 +14,9 @@ use rayon::prelude::*;
 
 use super::plan::{GatherGroup, Instr, Out, Region, Src};
 use super::{Executor, first_non_finite};
-use crate::ops::{add_into, gather, scatter_add, sum};
+use super::{Graph, NONE, Node, NonFinite, Op};
+use crate::kernels::{add_into, gather, scatter_add, sum};
 use crate::real::Real;
-use crate::tape::{Graph, NONE, Node, NonFinite, Op};
 
 /// Most elements per tile.
 const TILE: usize = 1024;

@@ -1,15 +1,9 @@
-//! Concat: `y = [x_0, x_1, ...]`, arrays laid end to end.
-//!
-//! VJP, with `gx_k = dL/dx_k` and `gy = dL/dy`: `gx_k += gy[at_k..at_k + len_k]`,
-//! where `at_k` is where part `k` starts in `y` (a part listed twice gets
-//! both ranges).
-//!
-//! Structural: its output has another length than any input, so it cannot
-//! share a region's tiles; it runs as a plain step over whole arrays.
+//! Concat on the tape: its constructor and its tests. What it
+//! computes, forward and backward, is `kernels::concat`.
 
-use crate::ops::add_into;
+use crate::exec::Op;
 use crate::real::Real;
-use crate::tape::{Op, Tape, Var};
+use crate::tape::{Tape, Var};
 
 impl<T: Real> Tape<T> {
     /// The arrays laid end to end.
@@ -21,28 +15,6 @@ impl<T: Real> Tape<T> {
             len += p.len();
         }
         self.record_iter(Op::Concat, len, parts.iter().copied())
-    }
-}
-
-/// Forward: the parts, in order, fill `y`.
-pub(crate) fn forward<'a, T: Real>(parts: impl Iterator<Item = &'a [T]>, y: &mut [T]) {
-    let mut at = 0;
-    for x in parts {
-        y[at..at + x.len()].copy_from_slice(x);
-        at += x.len();
-    }
-}
-
-/// VJP: for each part, in order, its length and its gradient (None where
-/// none flows), `gx_k += gy[at_k..at_k + len_k]`. The parts' gradients are
-/// taken one at a time, so a part listed twice may yield the same buffer twice.
-pub(crate) fn backward<'a, T: Real>(gy: &[T], parts: impl Iterator<Item = (usize, Option<&'a mut [T]>)>) {
-    let mut at = 0;
-    for (len, gx) in parts {
-        if let Some(gx) = gx {
-            add_into(gx, &gy[at..at + len]);
-        }
-        at += len;
     }
 }
 

@@ -2,20 +2,20 @@
 //!
 //! Elementwise ops broadcast length-1 arrays; any other length mismatch
 //! panics with the op's name and both shapes. Their constructors are here,
-//! each one's forward `f` and derivatives `df` in `map`, their tests in
-//! `tests`.
+//! each one's forward `f` and derivatives `df` in `kernels::map`, their
+//! tests in `tests`.
 //!
 //! A structural op (its output is not an elementwise function of its
-//! inputs) is one file holding its constructor, its forward and backward
-//! kernels and its tests: `sum`, `gather`, `scatter_add`, `slice`, `concat`,
-//! `custom`. The executor (`exec`) only decides where and in which order
-//! the kernels run.
+//! inputs) has a file here with its constructor and its tests (`sum`,
+//! `gather`, `scatter_add`, `slice`, `concat`, `custom`), and one of the same
+//! name in `kernels` with what it computes, forward and backward. The layers
+//! go one way: the kernels know only the numbers, the executor (`exec`) the
+//! recorded graph and the kernels, the tape the executor, and the ops here
+//! the tape.
 
 pub(crate) mod concat;
 pub mod custom;
 pub(crate) mod gather;
-pub(crate) mod index;
-pub(crate) mod map;
 pub(crate) mod scatter_add;
 pub(crate) mod slice;
 pub(crate) mod sum;
@@ -25,9 +25,10 @@ mod tests;
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
+use crate::exec::Op;
+use crate::kernels::map::MapKind;
 use crate::real::Real;
-use crate::tape::{Op, Var};
-use map::MapKind;
+use crate::tape::Var;
 
 impl<'t, T: Real> Var<'t, T> {
     /// Records an elementwise op over `inputs` (lengths equal, or 1 to broadcast).
@@ -260,12 +261,3 @@ macro_rules! scalar_on_left {
 }
 
 scalar_on_left!(f32, f64);
-
-/// dst += src, elementwise (adjoints of slice and concat, and the reduction
-/// of the chunks' private accumulators).
-#[inline]
-pub(crate) fn add_into<T: Real>(dst: &mut [T], src: &[T]) {
-    for (d, &s) in dst.iter_mut().zip(src) {
-        *d += s;
-    }
-}

@@ -1,18 +1,10 @@
-//! Scatter-add: `y[idx[i]] += x[i]` into `len` zeros (a segmented sum, e.g.
-//! samples into pixels, when `idx` holds segment ids).
-//!
-//! VJP, with `gx = dL/dx` and `gy = dL/dy`: `gx[i] += gy[idx[i]]`. The
-//! adjoint of a scatter-add is a gather.
-//!
-//! Structural: any element of the domain may add into any output element,
-//! so the output is complete only after the whole domain has run. It ends its
-//! region (a *sink*), and the chunks of a parallel region add into private
-//! copies that are reduced in chunk order (the same result on any number of
-//! threads).
+//! Scatter-add on the tape: its constructor and its tests. What it
+//! computes, forward and backward, is `kernels::scatter_add`.
 
-use crate::ops::index::{check_addressable, check_indices};
+use crate::exec::Op;
+use crate::kernels::index::check_addressable;
 use crate::real::Real;
-use crate::tape::{Op, Var};
+use crate::tape::Var;
 
 impl<'t, T: Real> Var<'t, T> {
     /// `out[indices[i]] += self[i]` into `len` zeros. Adjoint: gather of the
@@ -35,29 +27,6 @@ impl<'t, T: Real> Var<'t, T> {
     /// segment_ids[i] = s` (e.g. samples into pixels), `segments` outputs.
     pub fn segmented_sum(self, segment_ids: Self, segments: usize) -> Self {
         self.scatter_add(segment_ids, segments)
-    }
-}
-
-/// Forward over one tile: `y[idx[i]] += x[i]`, into the whole output (or a
-/// chunk's private copy of it).
-#[inline]
-pub(crate) fn forward_tile<T: Real>(x: &[T], idx: &[T], y: &mut [T]) {
-    check_indices(idx, y.len(), "scatter_add");
-    for (&x, &i) in x.iter().zip(idx) {
-        // SAFETY: checked above.
-        unsafe { *y.get_unchecked_mut(i.to_index_unchecked()) += x };
-    }
-}
-
-/// VJP over one tile: `gx[i] += gy[idx[i]]`, a gather from the whole output's
-/// adjoint `gy` (`gx = ...` when `accumulate` is false).
-#[inline]
-pub(crate) fn backward_tile<T: Real>(gy: &[T], idx: &[T], gx: &mut [T], accumulate: bool) {
-    check_indices(idx, gy.len(), "scatter_add");
-    let acc = if accumulate { T::one() } else { T::zero() };
-    for (g, &i) in gx.iter_mut().zip(idx) {
-        // SAFETY: checked above.
-        *g = acc.mul_add(*g, unsafe { *gy.get_unchecked(i.to_index_unchecked()) });
     }
 }
 
