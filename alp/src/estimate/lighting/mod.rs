@@ -33,7 +33,7 @@ use super::report::{PhaseReport, resident_mb};
 use super::settings::{LightingSettings, Settings};
 use crate::error::{Error, Result};
 use crate::objective::{DARK_FRACTION, DataTerm, mask_mean_luminance};
-use phase::TapeScene;
+use phase::{Level, TapeScene};
 
 /// What a lighting fit is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -284,7 +284,13 @@ pub(super) fn fit_lighting(
     let (transport, solved, finest_start) = match start {
         Some(x0) => {
             let transport = at(size);
-            let solved = terms.solve(&transport, &data, solve_settings, x0, &scene)?;
+            let level = Level {
+                transport: &transport,
+                data: &data,
+                settings: solve_settings,
+                start: x0,
+            };
+            let solved = terms.solve(&level, &scene)?;
             (transport, solved, x0.to_vec())
         }
         None => {
@@ -321,7 +327,13 @@ pub(super) fn fit_lighting(
                     },
                     ..solve_settings
                 };
-                let level_solved = terms.solve(&t, &data, level_settings, &x0, &scene)?;
+                let at_level = Level {
+                    transport: &t,
+                    data: &data,
+                    settings: level_settings,
+                    start: &x0,
+                };
+                let level_solved = terms.solve(&at_level, &scene)?;
                 (solved, previous, transport, finest_start) = (level_solved, level, Some(t), x0);
                 evaluations += solved.evaluations;
             }
@@ -337,7 +349,15 @@ pub(super) fn fit_lighting(
     let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];
     transport.apply(&env, &mut rendered);
     let term_values = match term_values {
-        true => terms.values(&transport, &data, solve_settings, &finest_start, &env, &scene)?,
+        true => {
+            let level = Level {
+                transport: &transport,
+                data: &data,
+                settings: solve_settings,
+                start: &finest_start,
+            };
+            terms.values(&level, &env, &scene)?
+        }
         false => BTreeMap::new(),
     };
     Ok(LightingFit {

@@ -56,6 +56,15 @@ pub struct LightingTerms {
     plan: Plan,
 }
 
+/// One solve of a fit: its transport, the data term, its bounds and budget,
+/// and the map it starts from (which also sets its smoothness's levels).
+pub(in crate::estimate) struct Level<'a> {
+    pub(in crate::estimate) transport: &'a Arc<Transport>,
+    pub(in crate::estimate) data: &'a Arc<DataTerm>,
+    pub(in crate::estimate) settings: LightingSolve,
+    pub(in crate::estimate) start: &'a [f64],
+}
+
 /// What the terms on a tape read besides the map: the photo, the pose and
 /// the pixels the transport renders.
 pub(in crate::estimate) struct TapeScene<'a> {
@@ -101,47 +110,30 @@ impl LightingTerms {
         matches!(self.plan, Plan::Exact(_))
     }
 
-    /// The map minimising the terms over `transport` from `x0` with the
-    /// data term `data` and the bounds and budget of `settings`.
-    pub(in crate::estimate) fn solve(
-        &self,
-        transport: &Arc<Transport>,
-        data: &Arc<DataTerm>,
-        settings: LightingSolve,
-        x0: &[f64],
-        scene: &TapeScene,
-    ) -> Result<Solved> {
+    /// The map minimising the terms at `level`.
+    pub(in crate::estimate) fn solve(&self, level: &Level, scene: &TapeScene) -> Result<Solved> {
         match &self.plan {
-            Plan::Exact(smoothness) => solve(transport, data, smoothness, settings, x0),
-            Plan::Tape => self.solve_on_tape(transport, data, settings, x0, scene),
+            Plan::Exact(smoothness) => solve(level.transport, level.data, smoothness, level.settings, level.start),
+            Plan::Tape => self.solve_on_tape(level, scene),
         }
     }
 
-    /// Each lighting term's unweighted value at the map `env`, solved
-    /// from `start`.
+    /// Each lighting term's unweighted value at the map `env`, solved at
+    /// `level`.
     pub(in crate::estimate) fn values(
         &self,
-        transport: &Arc<Transport>,
-        data: &Arc<DataTerm>,
-        settings: LightingSolve,
-        start: &[f64],
+        level: &Level,
         env: &[f64],
         scene: &TapeScene,
     ) -> Result<BTreeMap<String, f64>> {
-        let recorder = Recorder::new(self, transport, data, settings, start, scene)?;
+        let recorder = Recorder::new(self, level, scene)?;
         let tape = Tape::new();
         Ok(recorder.record(&tape, env)?.1.values())
     }
 
-    fn solve_on_tape(
-        &self,
-        transport: &Arc<Transport>,
-        data: &Arc<DataTerm>,
-        settings: LightingSolve,
-        x0: &[f64],
-        scene: &TapeScene,
-    ) -> Result<Solved> {
-        let recorder = Recorder::new(self, transport, data, settings, x0, scene)?;
+    fn solve_on_tape(&self, level: &Level, scene: &TapeScene) -> Result<Solved> {
+        let (settings, x0) = (level.settings, level.start);
+        let recorder = Recorder::new(self, level, scene)?;
         let curvature = recorder.curvature();
         let mut failure = None;
         let mut objective = |x: &[f64], g: &mut [f64]| -> f64 {
@@ -205,14 +197,13 @@ struct Recorder<'a> {
 }
 
 impl<'a> Recorder<'a> {
-    fn new(
-        terms: &'a LightingTerms,
-        transport: &Arc<Transport>,
-        data: &Arc<DataTerm>,
-        settings: LightingSolve,
-        start: &[f64],
-        scene: &'a TapeScene<'a>,
-    ) -> Result<Self> {
+    fn new(terms: &'a LightingTerms, level: &Level, scene: &'a TapeScene<'a>) -> Result<Self> {
+        let Level {
+            transport,
+            data,
+            settings,
+            start,
+        } = *level;
         let basis = PriorBasis::new(
             transport,
             data,
@@ -346,10 +337,13 @@ mod tests {
             pixels: &pixels,
             seed: 5,
         };
-        terms
-            .solve(&transport, &data, settings, &x0, &scene)
-            .expect("a solve")
-            .env
+        let level = Level {
+            transport: &transport,
+            data: &data,
+            settings,
+            start: &x0,
+        };
+        terms.solve(&level, &scene).expect("a solve").env
     }
 
     #[test]
