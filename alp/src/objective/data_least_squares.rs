@@ -76,16 +76,17 @@ impl DataTerm {
             .max(1e-30)
     }
 
-    /// The data term at the pixels' radiance `rendered` (one value per
-    /// pixel and channel, `at(p, c)`): `sum_pc w_pc r_pc^2 / norm`.
-    pub fn value(&self, at: impl Fn(usize, usize) -> f64) -> f64 {
+    /// The weighted squared error at the pixels' radiance (one value per
+    /// pixel and channel, `at(p, c)`), `sum_pc w_pc r_pc^2`: the data term
+    /// times its [`norm`](Self::norm), which a solve computes once.
+    pub fn weighted_sq_sum(&self, at: impl Fn(usize, usize) -> f64) -> f64 {
         let mut f = 0.0;
         for p in 0..self.target.len() {
             for c in 0..3 {
                 f += self.weight[p][c] * self.residual(p, c, at(p, c)).powi(2);
             }
         }
-        f / self.norm()
+        f
     }
 }
 
@@ -158,7 +159,7 @@ impl CustomOp<f64> for DataOp {
     }
 
     fn forward(&self, inputs: &[&[f64]], output: &mut [f64]) {
-        output[0] = self.data.value(|p, c| inputs[c][p]);
+        output[0] = self.data.weighted_sq_sum(|p, c| inputs[c][p]) / self.norm;
     }
 
     fn vjp(&self, inputs: &[&[f64]], _output: &[f64], grad_output: &[f64], grad_inputs: &mut [Option<&mut [f64]>]) {

@@ -8,7 +8,7 @@
 //! What it is built on ([`PriorBasis`]) the solve fixes once from its start
 //! and the data: the local levels, the data's scale and the clipped lights.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use autodiff::{CustomOp, Var};
 use render::colour::luminance;
@@ -142,7 +142,10 @@ impl Term for NeighbourSmoothness {
                 ),
             ));
         }
-        let op = Arc::new(PriorOp(basis.prior(&self.at_weight(1.0))));
+        let op = Arc::new(PriorOp {
+            prior: basis.prior(&self.at_weight(1.0)),
+            gradient: Mutex::default(),
+        });
         Ok(Some(ctx.tape.custom(op, &[env.texels])))
     }
 }
@@ -364,7 +367,20 @@ impl Prior {
 }
 
 /// The prior as one tape op over the map's texels.
-struct PriorOp(Prior);
+struct PriorOp {
+    prior: Prior,
+    /// The prior's gradient, a buffer reused from call to call.
+    gradient: Mutex<Vec<f64>>,
+}
+
+impl PriorOp {
+    /// The prior's value at `x`, its gradient left in `gradient`.
+    fn evaluate(&self, x: &[f64], gradient: &mut Vec<f64>) -> f64 {
+        gradient.clear();
+        gradient.resize(x.len(), 0.0);
+        self.prior.add_value_and_gradient(x, gradient)
+    }
+}
 
 impl CustomOp<f64> for PriorOp {
     fn name(&self) -> &str {
@@ -376,18 +392,19 @@ impl CustomOp<f64> for PriorOp {
     }
 
     fn forward(&self, inputs: &[&[f64]], output: &mut [f64]) {
-        output[0] = self
-            .0
-            .add_value_and_gradient(inputs[0], &mut vec![0.0; inputs[0].len()]);
+        let mut gradient = self.gradient.lock().unwrap_or_else(|e| e.into_inner());
+        output[0] = self.evaluate(inputs[0], &mut gradient);
     }
 
     fn vjp(&self, inputs: &[&[f64]], _output: &[f64], grad_output: &[f64], grad_inputs: &mut [Option<&mut [f64]>]) {
         let Some(grad) = grad_inputs[0].as_deref_mut() else {
             return;
         };
-        let mut g = vec![0.0; inputs[0].len()];
-        self.0.add_value_and_gradient(inputs[0], &mut g);
-        grad.iter_mut().zip(&g).for_each(|(a, b)| *a += grad_output[0] * b);
+        let mut gradient = self.gradient.lock().unwrap_or_else(|e| e.into_inner());
+        self.evaluate(inputs[0], &mut gradient);
+        grad.iter_mut()
+            .zip(gradient.iter())
+            .for_each(|(a, b)| *a += grad_output[0] * b);
     }
 }
 
@@ -446,12 +463,15 @@ mod tests {
                 );
             }
             // The tape op adds the same gradient, scaled by its upstream.
-            let op = Arc::new(PriorOp(prior));
+            let op = Arc::new(PriorOp {
+                prior,
+                gradient: Mutex::default(),
+            });
             let report = autodiff::gradcheck::gradcheck(&[autodiff::gradcheck::Input::Var(x.clone())], |t, v| {
                 t.custom(op.clone(), v) * 1.7
             });
             assert!(report.worst_rel_error < 1e-6, "edge^2 {edge_sq}: {report}");
-            pairs = Arc::into_inner(op).expect("the last reference").0.pairs;
+            pairs = Arc::into_inner(op).expect("the last reference").prior.pairs;
         }
     }
 

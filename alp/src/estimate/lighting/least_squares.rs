@@ -96,7 +96,7 @@ pub fn solve(
             g,
             &mut scratch,
         );
-        let f = data.value(|p, c| rendered[p][c]);
+        let f = data.weighted_sq_sum(|p, c| rendered[p][c]) / data_norm;
         f + prior.add_value_and_gradient(x, g)
     };
     minimise(&mut objective, &curvature, &basis, settings, x0)

@@ -248,12 +248,7 @@ pub(super) fn fit_lighting(
     let keep = |p: u32| pixels.keeps(p, camera.width);
     let record = SampleRecord::trace(probe.asset, probe.bsdf, pose, camera, settings, sampling, passes, keep)?;
     let mut data = pixel_targets(photo, &record.hits, clipped, purpose, lighting)?;
-    let scene = TapeScene {
-        photo,
-        pose,
-        pixels: &record.hits.pixels,
-        seed: settings.seed,
-    };
+    let scene = TapeScene::new(photo, pose, &record.hits.pixels, settings.seed);
     if purpose == LightingPurpose::Output {
         let r = &record;
         let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());

@@ -11,6 +11,7 @@
 //! searches' solves are instruments of the search, a data term and a
 //! quadratic smoothness of their own weight ([`LightingTerms::quadratic`]).
 
+use std::cell::OnceCell;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -68,10 +69,41 @@ pub(in crate::estimate) struct Level<'a> {
 /// What the terms on a tape read besides the map: the photo, the pose and
 /// the pixels the transport renders.
 pub(in crate::estimate) struct TapeScene<'a> {
-    pub(in crate::estimate) photo: &'a Photo,
-    pub(in crate::estimate) pose: &'a Pose,
-    pub(in crate::estimate) pixels: &'a [u32],
-    pub(in crate::estimate) seed: u64,
+    photo: &'a Photo,
+    pose: &'a Pose,
+    pixels: &'a [u32],
+    seed: u64,
+    /// The photo's mask prepared for the mask terms and its mean level in
+    /// the mask, made when a tape first needs them: once per fit, not per
+    /// level, and never for a fit the exact solve alone minimises.
+    prepared: OnceCell<(ReferenceMask, f64)>,
+}
+
+impl<'a> TapeScene<'a> {
+    /// The scene of a fit at `pose` rendering `pixels` of `photo`, its
+    /// stochastic terms seeded `seed`.
+    pub(in crate::estimate) fn new(photo: &'a Photo, pose: &'a Pose, pixels: &'a [u32], seed: u64) -> Self {
+        TapeScene {
+            photo,
+            pose,
+            pixels,
+            seed,
+            prepared: OnceCell::new(),
+        }
+    }
+
+    /// The photo's prepared mask and its mean level in the mask.
+    fn prepared(&self) -> Result<&(ReferenceMask, f64)> {
+        if self.prepared.get().is_none() {
+            let photo = self.photo;
+            let prepared = (
+                ReferenceMask::new(&photo.mask)?,
+                mask_mean_luminance(&photo.image, &photo.mask)?,
+            );
+            let _ = self.prepared.set(prepared);
+        }
+        Ok(self.prepared.get().expect("set above"))
+    }
 }
 
 impl LightingTerms {
@@ -189,10 +221,11 @@ struct Recorder<'a> {
     op: Arc<TransportOp>,
     inputs: LightingInputs,
     scene: &'a TapeScene<'a>,
-    reference: ReferenceMask,
+    reference: &'a ReferenceMask,
     weight: Vec<f64>,
     level: f64,
     pose: [f64; render::posed::POSE_PARAMS],
+    front_facing: glam::Quat,
     size: (usize, usize),
 }
 
@@ -211,7 +244,7 @@ impl<'a> Recorder<'a> {
             settings.relative_smoothness,
             settings.clipped_light_share,
         );
-        let photo = scene.photo;
+        let (reference, level) = scene.prepared()?;
         Ok(Recorder {
             terms,
             op: Arc::new(TransportOp::new(transport.clone())),
@@ -220,10 +253,11 @@ impl<'a> Recorder<'a> {
                 basis,
             },
             scene,
-            reference: ReferenceMask::new(&photo.mask)?,
+            reference,
             weight: (0..data.target.len()).map(|p| data.used(p) as u8 as f64).collect(),
-            level: mask_mean_luminance(&photo.image, &photo.mask)?,
+            level: *level,
             pose: pack_pose(scene.pose),
+            front_facing: front_facing(&scene.photo.camera),
             size: (transport.width, transport.height),
         })
     }
@@ -267,12 +301,12 @@ impl<'a> Recorder<'a> {
             tape,
             pose: &pose,
             camera,
-            reference: &self.reference,
+            reference: self.reference,
             soft_mask: None,
             image: Some(image),
             env: Some(&map),
             lighting: Some(&self.inputs),
-            front_facing: front_facing(camera),
+            front_facing: self.front_facing,
             progress: LIGHTING_PROGRESS,
             seed: self.scene.seed,
         })?;
@@ -331,12 +365,7 @@ mod tests {
             max_iters: 2000,
             method: LightingMethod::LeastSquares,
         };
-        let scene = TapeScene {
-            photo: &photo,
-            pose: &Pose::IDENTITY,
-            pixels: &pixels,
-            seed: 5,
-        };
+        let scene = TapeScene::new(&photo, &Pose::IDENTITY, &pixels, 5);
         let level = Level {
             transport: &transport,
             data: &data,
