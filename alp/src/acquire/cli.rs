@@ -11,7 +11,7 @@ use super::capture::Capture;
 use super::registration::RegistrationSettings;
 use super::truth::Truth;
 use super::{AcquireSettings, Acquisition, Solver, acquire};
-use crate::cli::{QualityArg, ThreadsArg, progress_bar};
+use crate::cli::{QualityArg, ThreadsArg, parse_dimensions, progress_bar};
 use crate::error::{Error, Result};
 
 /// Flags of `alp acquire`.
@@ -75,17 +75,11 @@ fn parse_solver(s: &str) -> Result<Solver> {
 
 /// The texture size of `--texture-size`.
 fn parse_texture_size(s: &str) -> Result<[usize; 2]> {
-    let bad = || {
-        Error::invalid(
-            "--texture-size",
-            format!("`{s}` is not WIDTHxHEIGHT, each from {MIN_SIDE} to {MAX_SIDE}"),
-        )
-    };
-    let (w, h) = s.split_once('x').ok_or_else(bad)?;
-    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if !(MIN_SIDE..=MAX_SIDE).contains(&w) || !(MIN_SIDE..=MAX_SIDE).contains(&h) {
-        return Err(bad());
-    }
+    let sides = MIN_SIDE..=MAX_SIDE;
+    let what = format!("each side from {MIN_SIDE} to {MAX_SIDE}");
+    let (w, h) = parse_dimensions(s, "--texture-size", &what, |w, h| {
+        sides.contains(&w) && sides.contains(&h)
+    })?;
     Ok([w, h])
 }
 

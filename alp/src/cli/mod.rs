@@ -58,18 +58,22 @@ pub(crate) fn parse_quality(q: &str) -> Result<Quality> {
 
 /// A `WIDTHxHEIGHT` env map size, 2:1.
 pub(crate) fn parse_size(s: &str) -> Result<(usize, usize)> {
-    let bad = || {
-        Error::invalid(
-            "--env-size",
-            format!("`{s}` is not WIDTHxHEIGHT with WIDTH = 2 x HEIGHT"),
-        )
-    };
-    let (w, h) = s.split_once('x').ok_or_else(bad)?;
-    let (w, h): (usize, usize) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-    if w != 2 * h || h < 2 {
-        return Err(bad());
-    }
-    Ok((w, h))
+    parse_dimensions(s, "--env-size", "WIDTH = 2 x HEIGHT", |w, h| w == 2 * h && h >= 2)
+}
+
+/// `WIDTHxHEIGHT` given to `flag`, which `valid(width, height)` accepts (its
+/// rule, `what`, said in the error).
+pub(crate) fn parse_dimensions(
+    s: &str,
+    flag: &str,
+    what: &str,
+    valid: impl Fn(usize, usize) -> bool,
+) -> Result<(usize, usize)> {
+    let size = s
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+        .filter(|&(w, h)| valid(w, h));
+    size.ok_or_else(|| Error::invalid(flag, format!("`{s}` is not WIDTHxHEIGHT with {what}")))
 }
 
 /// A pool of `threads` workers (all cores when `None`).
