@@ -11,7 +11,8 @@
 //! is, per sphere:
 //! - mirror: the env lookup of the reflected direction, one per sub-pixel position;
 //! - shiny: Monte Carlo, one GGX visible-normal sample and one env-map sample per sub-pixel
-//!   position, combined by multiple importance sampling (a sun defeats BRDF sampling alone);
+//!   position, combined by multiple importance sampling (a sun defeats BRDF sampling alone):
+//!   render's point shading ([`ShadingPoint`]) with its GGX metal;
 //! - diffuse: a noise-free quadrature of the irradiance over a 128 x 64 grid ([`IRRADIANCE_ROWS`]).
 //!
 //! Sampling: `spp = n x n` sub-pixel positions on a jittered n x n grid (a box filter over the
@@ -25,10 +26,12 @@ use std::f32::consts::FRAC_1_PI;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+use render::bsdf::{GgxMetal, PointSurface};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::{Mask, RgbImage};
-use render::sampling::{EnvSampler, Frame, Rng, ggx};
+use render::integrator::ShadingPoint;
+use render::sampling::{EnvSampler, Frame, Rng};
 
 use crate::error::{Error, Result};
 
@@ -40,8 +43,11 @@ pub const CAMERA_DISTANCE: f32 = 5.0;
 pub const FOV_MARGIN: f32 = 1.04;
 /// Pixels are evaluated when their centre ray hits the sphere at least this far inside its silhouette.
 pub const SILHOUETTE_INSET_PX: f32 = 1.5;
-/// GGX alpha of the shiny sphere (roughness r = sqrt(0.1) = 0.316).
-pub const SHINY_ALPHA: f32 = 0.1;
+/// The shiny sphere's material: GGX metal, albedo 1, roughness sqrt(0.1) (alpha = r^2 = 0.1).
+pub const SHINY: PointSurface = PointSurface {
+    albedo: [1.0; 3],
+    roughness: 0.316_227_77,
+};
 /// Albedo of the diffuse sphere.
 pub const DIFFUSE_ALBEDO: f32 = 0.8;
 /// Default samples per pixel, 32 x 32: the shiny sphere's noise floor (two seeds, courtyard map)
@@ -211,7 +217,13 @@ fn relight_pixel(
         let u_lobe = jittered(lobe_strata[k], strata, &mut rng);
         let u_light = jittered(light_strata[k], strata, &mut rng);
         let mirror = env.lookup(direction - 2.0 * direction.dot(normal) * normal);
-        let shiny = estimate_shiny(env, lights, &frame, wo, u_lobe, u_light);
+        let shiny = ShadingPoint {
+            bsdf: &GgxMetal,
+            surface: SHINY,
+            frame,
+            wo,
+        }
+        .reflected(lights, [u_lobe, u_light], |d| env.lookup(d));
         for (s, radiance) in [mirror, shiny].into_iter().enumerate() {
             for c in 0..3 {
                 sum[s][c] += radiance[c] as f64;
@@ -308,49 +320,6 @@ fn unit_sphere_normal(origin: Vec3, direction: Vec3) -> Option<Vec3> {
     (t > 0.0).then(|| (origin + t * direction).normalize())
 }
 
-/// `(f(wo, wi) cos(theta_i), pdf of the visible-normal sampler at wi)` of the shiny sphere (local
-/// frame; albedo 1, so Schlick's F is 1 and the BRDF is grey); both 0 below the horizon.
-fn shiny_eval(wo: Vec3, wi: Vec3) -> (f32, f32) {
-    if wi.z <= 0.0 {
-        return (0.0, 0.0);
-    }
-    (
-        ggx::brdf(wo, wi, [1.0; 3], SHINY_ALPHA)[0] * wi.z,
-        ggx::reflection_pdf(wo, wi, SHINY_ALPHA),
-    )
-}
-
-/// Two-sample estimate of the light the shiny sphere reflects towards `wo` (local frame): one
-/// direction from the GGX lobe (visible normals, `u_lobe`), one from the env map's luminance
-/// (`u_light`), combined by multiple importance sampling with the power heuristic (Veach 1997,
-/// section 9.2.4). The env sampler finds small bright sources (a sun) that the lobe rarely hits;
-/// the lobe covers what the piecewise-constant env pdf misses next to bright texels (the lookup
-/// is bilinear).
-fn estimate_shiny(env: &EnvMap, lights: &EnvSampler, frame: &Frame, wo: Vec3, u_lobe: Vec2, u_light: Vec2) -> [f32; 3] {
-    let power = |a: f32, b: f32| a * a / (a * a + b * b);
-    let mut out = [0.0f32; 3];
-    let mut add = |world: Vec3, weight: f32| {
-        if weight > 0.0 && weight.is_finite() {
-            let radiance = env.lookup(world);
-            for c in 0..3 {
-                out[c] += weight * radiance[c];
-            }
-        }
-    };
-    let wi = ggx::sample_reflection(wo, SHINY_ALPHA, u_lobe).wi;
-    let (f_cos, lobe_pdf) = shiny_eval(wo, wi);
-    if lobe_pdf > 0.0 {
-        let world = frame.to_world(wi);
-        add(world, f_cos / lobe_pdf * power(lobe_pdf, lights.pdf(world)));
-    }
-    let light = lights.sample(u_light);
-    let (f_cos, lobe_pdf) = shiny_eval(wo, frame.to_local(light.direction));
-    if light.pdf > 0.0 {
-        add(light.direction, f_cos / light.pdf * power(light.pdf, lobe_pdf));
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -385,6 +354,11 @@ mod tests {
         let n = unit_sphere_normal(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z).unwrap();
         assert!((n - Vec3::Z).length() < 1e-6);
         assert!(unit_sphere_normal(Vec3::new(0.0, 1.01, 5.0), -Vec3::Z).is_none());
+    }
+
+    #[test]
+    fn the_shiny_sphere_has_alpha_a_tenth() {
+        assert_eq!(SHINY.roughness * SHINY.roughness, 0.1);
     }
 
     #[test]

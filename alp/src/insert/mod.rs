@@ -18,14 +18,13 @@
 //! plane's irradiance with it is E - E_blocked + E_bounce; both are Monte
 //! Carlo estimates per pixel over directions drawn half from the map and half
 //! from the cosine (balance heuristic: a sun's sharp shadow and the soft
-//! contact shadow both converge), the object's light by one sample of the
-//! map through its BSDF (map or BSDF sampling, balance heuristic). (A white object on a grey floor gives back a third to
+//! contact shadow both converge), the object's light by render's point
+//! shading ([`ShadingPoint`]: a BSDF and a map sample, shadowed by the object). (A white object on a grey floor gives back a third to
 //! a half of the light it blocks: the path-traced reference of the tests.)
 //!
 //! Left out: the plane seen by the object (the map's lower half stands in for
 //! it, in its render and in the light it sends to the plane).
 
-use std::f32::consts::FRAC_1_PI;
 use std::path::Path;
 
 use glam::{Vec2, Vec3};
@@ -34,17 +33,15 @@ use serde::Deserialize;
 
 use render::RenderError;
 use render::accel::Accel;
-use render::bsdf::{Bsdf, GgxMetal, Lambertian, Mirror};
+use render::bsdf::{Bsdf, GgxMetal, Lambertian, Mirror, PointBsdf, PointSurface};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::RgbImage;
-use render::integrator::{RenderSettings, render_layer};
+use render::integrator::{RenderSettings, ShadingPoint, render_layer};
 use render::mesh::{Mesh, Uvs};
 use render::pose::Pose;
 use render::probe::{ProbeAsset, Texture};
-use render::sampling::{
-    EnvSampler, Frame, Rng, cosine_hemisphere_pdf, ggx, sample_cosine_hemisphere, stratified_square,
-};
+use render::sampling::{EnvSampler, Frame, Rng, cosine_hemisphere_pdf, sample_cosine_hemisphere, stratified_square};
 
 use crate::error::{Error, Result};
 
@@ -78,6 +75,15 @@ impl Finish {
 
     /// The BSDF that renders it.
     pub fn bsdf(self) -> &'static dyn Bsdf<f32> {
+        match self {
+            Finish::Diffuse => &Lambertian,
+            Finish::Metal => &GgxMetal,
+            Finish::Mirror => &Mirror,
+        }
+    }
+
+    /// The same BSDF's point form, for the light the object sends the ground.
+    pub fn point_bsdf(self) -> &'static dyn PointBsdf {
         match self {
             Finish::Diffuse => &Lambertian,
             Finish::Metal => &GgxMetal,
@@ -444,8 +450,8 @@ impl<'a> PosedObject<'a> {
     }
 
     /// When the ray from `point` along `wi` meets the object: the radiance the
-    /// object sends back along it, by one sample of the map lit through its
-    /// BSDF (shadowed by the object itself; the ground is not traced).
+    /// object sends back along it, by one BSDF and one map sample
+    /// ([`ShadingPoint`]; shadowed by the object itself, the ground not traced).
     fn radiance_towards(
         &self,
         point: Vec3,
@@ -463,54 +469,26 @@ impl<'a> PosedObject<'a> {
         let uv = self.mesh.interpolate(&self.mesh.uvs, t, hit.barycentric);
         let frame = Frame::from_normal(normal);
         let wo = frame.to_local(-wi);
-        if wo.z <= 0.0 {
-            return Some([0.0; 3]);
-        }
         let asset = &self.object.asset;
-        let albedo = asset.albedo.lookup(uv);
+        let point = ShadingPoint {
+            bsdf: self.object.finish.point_bsdf(),
+            surface: PointSurface {
+                albedo: asset.albedo.lookup(uv),
+                roughness: asset.roughness.lookup(uv)[0],
+            },
+            frame,
+            wo,
+        };
         let visibility = asset.visibility.lookup(uv)[0];
-        let roughness = asset.roughness.lookup(uv)[0];
-        let u = Vec2::new(rng.next_f32(), rng.next_f32());
         let origin = self.mesh.interpolate(&self.mesh.positions, t, hit.barycentric);
-        let light = |bounce: Vec3| {
-            let out = frame.to_world(bounce);
-            if bounce.z <= 0.0 || self.accel.occluded(origin, out, BOUNCE_RAY_OFFSET, f32::INFINITY) {
+        let light = point.reflected(sampler, [rng.next_2d(), rng.next_2d()], |out| {
+            if self.accel.occluded(origin, out, BOUNCE_RAY_OFFSET, f32::INFINITY) {
                 [0.0; 3]
             } else {
                 env.lookup(out)
             }
-        };
-        let shade = |weight: [f32; 3], l: [f32; 3]| Some(std::array::from_fn(|c| weight[c] * visibility * l[c]));
-        if self.object.finish == Finish::Mirror {
-            let bounce = Vec3::new(-wo.x, -wo.y, wo.z);
-            return shade(albedo, light(bounce));
-        }
-        // One sample of the map or the BSDF, half and half, by the balance
-        // heuristic (a sun lights a diffuse object through the map's samples).
-        let bounce = if rng.next_f32() < 0.5 {
-            frame.to_local(sampler.sample(u).direction)
-        } else {
-            match self.object.finish {
-                Finish::Metal => ggx::sample_reflection(wo, ggx::alpha_from_roughness(roughness), u).wi,
-                _ => sample_cosine_hemisphere(u),
-            }
-        };
-        if bounce.z <= 0.0 {
-            return Some([0.0; 3]);
-        }
-        let (f_cos, pdf_bsdf) = match self.object.finish {
-            Finish::Metal => {
-                let alpha = ggx::alpha_from_roughness(roughness);
-                let f = ggx::brdf(wo, bounce, albedo, alpha);
-                (f.map(|v| v * bounce.z), ggx::reflection_pdf(wo, bounce, alpha))
-            }
-            _ => (albedo.map(|a| a * bounce.z * FRAC_1_PI), cosine_hemisphere_pdf(bounce)),
-        };
-        let pdf = 0.5 * sampler.pdf(frame.to_world(bounce)) + 0.5 * pdf_bsdf;
-        if pdf <= 0.0 || !pdf.is_finite() {
-            return Some([0.0; 3]);
-        }
-        shade(f_cos.map(|f| f / pdf), light(bounce))
+        });
+        Some(light.map(|l| visibility * l))
     }
 }
 

@@ -24,6 +24,7 @@
 //! is a constant of each sample).
 
 mod hits;
+mod point;
 mod samples;
 
 use autodiff::Tape;
@@ -40,6 +41,7 @@ use crate::probe::ProbeAsset;
 use crate::sampling::EnvSampler;
 
 pub use hits::{Occluder, PrimaryHits};
+pub use point::ShadingPoint;
 pub use samples::{LightSamples, LightSampling, ProbeScene, ProbeVars};
 
 /// Monte Carlo settings.

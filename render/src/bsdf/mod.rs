@@ -7,8 +7,14 @@
 //! numbers), in the pose.
 //!
 //! Swapping the model is one line: pass another [`Bsdf`] to the integrator.
+//! Each model also has a point form ([`PointBsdf`], plain f32, no tape) for
+//! renders that need no derivatives.
 
 use autodiff::{Real, Var, Vec3 as Vec3Var};
+
+mod point;
+
+pub use point::{PointBsdf, PointSample, PointSurface};
 
 /// The material at each sample (from the probe's textures).
 #[derive(Clone, Copy, Debug)]
