@@ -1,8 +1,8 @@
 """Environment maps of the development benchmark (tools/bench_scenes.py), each drawn at random
 from a generator `rng` (numpy) as a W x H equirectangular map in shared/FORMATS.md's convention:
 
-    bundled  one of the three maps in assets/envmaps, turned about the vertical, perhaps
-             mirrored, white-balanced and exposed at random
+    real     a real map (the bundled three in assets/envmaps, the others of tools/real_maps.py),
+             turned about the vertical, perhaps mirrored, white-balanced and exposed at random
     sky      Mitsuba 3's `sunsky` emitter (Hosek-Wilkie sky and sun) at a random sun position
              and turbidity, baked texel by texel (supersampled where the sun is), above a ground
              and a skyline of buildings lit by that sky
@@ -46,8 +46,8 @@ def _box_downsample(img, h, w):
     return img[rows][:, cols]
 
 
-def bundled(rng, source):
-    """A bundled map (H x W x 3 array) turned, perhaps mirrored, white-balanced and exposed."""
+def real(rng, source):
+    """A real map (H x W x 3 array) turned, perhaps mirrored, white-balanced and exposed."""
     img = _box_downsample(source, H, W) if source.shape[:2] != (H, W) else source.copy()
     img = np.roll(img, int(rng.integers(0, W)), axis=1)
     mirrored = bool(rng.random() < 0.5)

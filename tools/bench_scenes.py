@@ -15,8 +15,9 @@ Each scene draws, from its own seed:
   5k to 40k triangles, roughness 0.03 to 0.4 across its regions;
 - its pose: upright (axis within 5 deg of vertical), tilted (15 to 65 deg) or lying (80 to 100
   deg) in 2 : 1 : 1, any turn about the axis;
-- lighting (tools/bench_lighting.py): a bundled map 40 % (train: courtyard and studio; test:
-  sunset: a map's source stays in one split), a `sunsky` sky 30 %, a room 30 %;
+- lighting (tools/bench_lighting.py), by scene index: a real map 60 % (each split has seven,
+  `REAL`: the bundled three and eleven Poly Haven maps fetched by tools/real_maps.py, each in
+  one split, taking turns), a `sunsky` sky 20 %, a room 20 %;
 - a camera: 640 x 480, vertical fov 30 to 55 deg, elevation -5 to 40 deg, the probe 60 to 300
   px tall somewhere in the frame;
 - the sensor: no noise (30 %) or multiplicative Gaussian noise of 0.5 to 3 %, and a clip at
@@ -53,14 +54,20 @@ import alp_mitsuba as am
 import bench_lighting as bl
 import bench_probes as bp
 import mitsuba_scenes as ms
+import real_maps as rm
 
 SEED = 20261203
-VERSION = 2  # of the draw: scenes of another version are made anew
+VERSION = 3  # of the draw: scenes of another version are made anew
 SPLITS = {"train": 1, "test": 2}
-BUNDLED = {"train": ("courtyard", "studio"), "test": ("sunset",)}
+# The real maps of each split (a map in one split only): the bundled three (assets/envmaps) and
+# the eleven of tools/real_maps.py, outdoor and indoor in both.
+REAL = {"train": ("courtyard", "studio", "bridge", "esplanade", "hall", "lab", "warehouse"),
+        "test": ("sunset", "dawn", "sky", "venice", "apartment", "lobby", "workshop")}
+BUNDLED_NAMES = ("courtyard", "studio", "sunset")
+# Lighting by scene index, so that each split is 60 % real maps, each map taking its turn.
+LIGHT_ROTA = ("real", "sky", "real", "room", "real")
 FAMILY_WEIGHTS = {"can": 0.35, "cap": 0.25, "bottle": 0.15, "sphere": 0.10, "ring": 0.15}
 POSE_WEIGHTS = {"upright": 0.5, "tilted": 0.25, "lying": 0.25}
-LIGHT_WEIGHTS = {"bundled": 0.4, "sky": 0.3, "room": 0.3}
 WIDTH, HEIGHT = 640, 480
 MAX_DEPTH = 4
 
@@ -136,36 +143,49 @@ def draw_camera(rng, probe_mesh, pose):
 
 
 def draw_scene(split, index):
-    """The scene's name and what it draws first (family, pose kind, lighting), with its
-    generator to draw the rest from: (name, rng, family, pose_kind, light)."""
+    """The scene's name and what it draws first (family, pose kind, lighting, and for a real
+    map which), with its generator to draw the rest from: (name, rng, family, pose_kind, light,
+    source)."""
     rng = np.random.default_rng([SEED, SPLITS[split], index])
     family = _choice(rng, FAMILY_WEIGHTS)
     pose_kind = _choice(rng, POSE_WEIGHTS)
-    light = _choice(rng, LIGHT_WEIGHTS)
-    name = "%03d_%s_%s_%s" % (index, family, pose_kind, light)
-    return name, rng, family, pose_kind, light
+    light = LIGHT_ROTA[index % len(LIGHT_ROTA)]
+    turn = sum(LIGHT_ROTA[k % len(LIGHT_ROTA)] == "real" for k in range(index))
+    source = REAL[split][turn % len(REAL[split])] if light == "real" else None
+    name = "%03d_%s_%s_%s" % (index, family, pose_kind, source or light)
+    return name, rng, family, pose_kind, light, source
 
 
 def make_scene(mi, split, index, folder, spp, sources):
-    name, rng, family, pose_kind, light = draw_scene(split, index)
+    name, rng, family, pose_kind, light, source = draw_scene(split, index)
     return render_scene(mi, rng, folder, spp, sources, split, pose_kind, light,
                         lambda probe_dir: bp.make_probe(family, rng, probe_dir, am.write_exr),
-                        {"name": name, "split": split, "index": index, "family": family})
+                        {"name": name, "split": split, "index": index, "family": family},
+                        lambda _rng: source)
 
 
-def render_scene(mi, rng, folder, spp, sources, split, pose_kind, light, put_probe, head):
+def real_sources(envmaps):
+    """Every real map of both splits by name, as arrays: the bundled ones from `envmaps`, the
+    others fetched by tools/real_maps.py when missing."""
+    fetched = rm.ensure()
+    return {n: am.read_exr(os.path.join(envmaps if n in BUNDLED_NAMES else fetched, n + ".exr"))
+            for s in REAL.values() for n in s}
+
+
+def render_scene(mi, rng, folder, spp, sources, split, pose_kind, light, put_probe, head, pick_map):
     """Draws the rest of a scene from `rng` and writes it to `folder` (whole or not at all):
     `put_probe(dir)` writes its probe folder there and returns the probe's description; `head`
-    (name, split, index, family) starts scene.json."""
+    (name, split, index, family) starts scene.json; `pick_map(rng)` names the real map of a
+    scene lit by one."""
     t0 = time.time()
     tmp = folder + ".tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     os.makedirs(tmp)
     probe_info = put_probe(os.path.join(tmp, "probe"))
     pose, tilt = draw_pose(rng, pose_kind, probe_info["centre_m"])
-    if light == "bundled":
-        source = str(rng.choice(BUNDLED[split]))
-        env, light_info = bl.bundled(rng, sources[source])
+    if light == "real":
+        source = pick_map(rng)
+        env, light_info = bl.real(rng, sources[source])
         light_info["source"] = source
     elif light == "sky":
         env, light_info = bl.sky(rng, mi)
@@ -227,7 +247,7 @@ def main():
     ap.add_argument("--alp", required=True, help="the alp binary (draws each scene's inputs as people have them)")
     args = ap.parse_args()
     mi = am.setup_variant(args.variant)
-    sources = {n: am.read_exr(os.path.join(args.envmaps, n + ".exr")) for s in BUNDLED.values() for n in s}
+    sources = real_sources(args.envmaps)
     for split, count in (("train", args.train), ("test", args.test)):
         root = os.path.join(args.out, split)
         os.makedirs(root, exist_ok=True)

@@ -322,10 +322,12 @@ def sha256_files(paths, extra):
 
 def evaluate(alp, work, scene_dir, est_dir, spp, cache, alp_sha):
     env, pose = os.path.join(est_dir, "env.exr"), os.path.join(est_dir, "pose.json")
-    key = sha256_files([env, pose], "%s|%d|%s" % (os.path.abspath(scene_dir), spp, alp_sha))
+    confidence = os.path.join(est_dir, "confidence.exr")
+    extra = ["--confidence", confidence] if os.path.isfile(confidence) else []
+    key = sha256_files([env, pose] + extra[1:], "%s|%d|%s" % (os.path.abspath(scene_dir), spp, alp_sha))
     if key in cache:
         return dict(cache[key], eval_cached=True)
-    out, wall, _, _ = run([alp, "eval", "--scene", scene_dir, "--env", env, "--pose", pose, "--spp", str(spp)],
+    out, wall, _, _ = run([alp, "eval", "--scene", scene_dir, "--env", env, "--pose", pose, "--spp", str(spp)] + extra,
                        cwd=work, log_path=os.path.join(est_dir, "eval.log"))
     res = json.loads(out.strip().splitlines()[-1])
     res["eval_s"] = round(wall, 2)

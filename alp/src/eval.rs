@@ -12,8 +12,11 @@ use render::envmap::EnvMap;
 use render::image_io::Mask;
 use render::pose::Pose;
 
+use render::colour::luminance;
+use render::envmap::resample;
+
 use crate::error::Result;
-use crate::relight::{RelightSettings, RelitSpheres, Sphere, evaluation_region, relight};
+use crate::relight::{RelightSettings, RelitSpheres, Sphere, evaluation_region, mirror_directions, relight};
 
 /// The angle in degrees between two RGB vectors.
 ///
@@ -145,6 +148,125 @@ pub fn relighting_errors(
     Ok(compare_spheres(&est, &gt, &evaluation_region()))
 }
 
+/// The mirror sphere's error over part of the evaluation region.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RegionErrors {
+    /// Mean per-pixel angle between RGB vectors, degrees (0 for no pixels).
+    pub angular_deg: f64,
+    /// The share of the evaluation region's pixels it covers.
+    pub share: f64,
+}
+
+/// A direction counts as seen by the probe where the estimate's confidence exceeds this.
+pub const SEEN_CONFIDENCE: f32 = 0.5;
+
+/// The mirror sphere's angular error split by what the probe saw: over the pixels whose
+/// reflected direction has `confidence` above [`SEEN_CONFIDENCE`], and over the rest (where the
+/// map is the prior's). `directions` are [`mirror_directions`]' of the scene.
+pub fn seen_and_unseen(
+    estimate: &RelitSpheres,
+    truth: &RelitSpheres,
+    directions: &[Option<glam::Vec3>],
+    confidence: &EnvMap,
+) -> [RegionErrors; 2] {
+    let region = evaluation_region();
+    let (est, gt) = (estimate.image(Sphere::Mirror), truth.image(Sphere::Mirror));
+    // Pixels of the seen part, then of the unseen: (estimate, truth) each.
+    let mut pixels: [[Vec<[f32; 3]>; 2]; 2] = Default::default();
+    for (p, inside) in region.inside.iter().enumerate() {
+        let Some(direction) = directions[p].filter(|_| *inside) else {
+            continue;
+        };
+        let part = usize::from(confidence.lookup(direction)[0] <= SEEN_CONFIDENCE);
+        pixels[part][0].push(est.pixels[p]);
+        pixels[part][1].push(gt.pixels[p]);
+    }
+    let total = region.count().max(1) as f64;
+    pixels.map(|[e, t]| RegionErrors {
+        angular_deg: angular_error_deg(&e, &t),
+        share: t.len() as f64 / total,
+    })
+}
+
+/// Rows of the map the artefact shares are counted at (128 x 64 texels).
+pub const ARTEFACT_ROWS: usize = 64;
+/// A texel's neighbourhood for the artefact shares: a square this many texels wide.
+pub const ARTEFACT_WINDOW: usize = 5;
+/// A texel's chromaticity (rgb / (r + g + b)) this far (Euclidean) from its neighbourhood's
+/// median counts as off-colour.
+pub const ARTEFACT_CHROMA: f64 = 0.08;
+/// A texel this many times darker or brighter than its neighbourhood's median luminance is a
+/// hole or a spike.
+pub const ARTEFACT_RATIO: f64 = 10.0;
+
+/// Shares of a map's texels, in percent, that stand out of their neighbourhood (the map at
+/// [`ARTEFACT_ROWS`] rows, [`ARTEFACT_WINDOW`]-square neighbourhoods, longitude wrapping, rows
+/// ending at the poles).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Artefacts {
+    /// Chromaticity [`ARTEFACT_CHROMA`] off the neighbourhood's (per-channel) median.
+    pub colour_pct: f64,
+    /// Luminance below the neighbourhood's median over [`ARTEFACT_RATIO`].
+    pub dark_pct: f64,
+    /// Luminance above [`ARTEFACT_RATIO`] times the neighbourhood's median.
+    pub bright_pct: f64,
+}
+
+/// The [`Artefacts`] of `env`.
+pub fn artefacts(env: &EnvMap) -> Artefacts {
+    let (w, h) = (2 * ARTEFACT_ROWS, ARTEFACT_ROWS);
+    let flat: Vec<f64> = env.radiance().iter().flatten().map(|&v| v as f64).collect();
+    let texels: Vec<[f64; 3]> = resample(&flat, (env.width(), env.height()), (w, h))
+        .chunks_exact(3)
+        .map(|t| [t[0], t[1], t[2]])
+        .collect();
+    let lum: Vec<f64> = texels.iter().map(|&t| luminance(t)).collect();
+    let chroma: Vec<Option<[f64; 3]>> = texels
+        .iter()
+        .map(|t| {
+            let sum = t[0] + t[1] + t[2];
+            (sum > 0.0).then(|| t.map(|v| v / sum))
+        })
+        .collect();
+    let median = |values: &mut Vec<f64>| {
+        values.sort_by(f64::total_cmp);
+        values[values.len() / 2]
+    };
+    let reach = (ARTEFACT_WINDOW / 2) as i64;
+    let (mut colour, mut dark, mut bright) = (0usize, 0usize, 0usize);
+    let (mut around_lum, mut around_chroma) = (Vec::new(), [Vec::new(), Vec::new(), Vec::new()]);
+    for r in 0..h as i64 {
+        for c in 0..w as i64 {
+            around_lum.clear();
+            around_chroma.iter_mut().for_each(Vec::clear);
+            for rr in (r - reach).max(0)..=(r + reach).min(h as i64 - 1) {
+                for dc in -reach..=reach {
+                    let k = rr as usize * w + (c + dc).rem_euclid(w as i64) as usize;
+                    around_lum.push(lum[k]);
+                    if let Some(x) = chroma[k] {
+                        (0..3).for_each(|ch| around_chroma[ch].push(x[ch]));
+                    }
+                }
+            }
+            let k = r as usize * w + c as usize;
+            let level = median(&mut around_lum);
+            dark += usize::from(lum[k] * ARTEFACT_RATIO < level);
+            bright += usize::from(lum[k] > ARTEFACT_RATIO * level);
+            if let Some(x) = chroma[k] {
+                let centre: [f64; 3] = std::array::from_fn(|ch| median(&mut around_chroma[ch]));
+                let off = (0..3).map(|ch| (x[ch] - centre[ch]).powi(2)).sum::<f64>().sqrt();
+                colour += usize::from(off > ARTEFACT_CHROMA);
+            }
+        }
+    }
+    let pct = |n: usize| 100.0 * n as f64 / (w * h) as f64;
+    Artefacts {
+        colour_pct: pct(colour),
+        dark_pct: pct(dark),
+        bright_pct: pct(bright),
+    }
+}
+
 /// A texel counts as speckle when one of its channels is more than this
 /// many times the third brightest of its eight neighbours' (plus
 /// [`SPECKLE_FLOOR`]): fewer than three neighbours come near it.
@@ -240,6 +362,17 @@ pub struct EvalReport {
     pub diffuse: SphereErrors,
     /// The estimated map's speckle per channel ([`speckle`]).
     pub speckle: [f64; 3],
+    /// The estimated map's [`artefacts`].
+    pub artefacts: Artefacts,
+    /// The true map's [`artefacts`], for reference.
+    pub true_artefacts: Artefacts,
+    /// The mirror sphere where the probe saw the map ([`seen_and_unseen`]), when the estimate's
+    /// confidence was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mirror_seen: Option<RegionErrors>,
+    /// The mirror sphere where it did not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mirror_unseen: Option<RegionErrors>,
     /// Pose errors, when an estimated pose was given.
     #[serde(flatten)]
     pub pose: Option<PoseErrors>,
@@ -285,25 +418,49 @@ impl SceneTruth {
     }
 }
 
-/// Evaluates an estimated env map (and optionally an estimated pose) against a scene's truth.
+/// What an estimate brings beside its map: its pose and its confidence (`confidence.exr`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct EstimateExtras<'a> {
+    /// The estimated pose, compared with the scene's `pose.json`.
+    pub pose: Option<&'a Pose>,
+    /// The estimate's confidence map, which splits the mirror's error into seen and unseen.
+    pub confidence: Option<&'a EnvMap>,
+}
+
+/// Evaluates an estimated env map (and optionally its pose and confidence) against a scene's truth.
 pub fn evaluate_scene(
     scene: &Path,
     estimate: &EnvMap,
-    estimated_pose: Option<&Pose>,
+    extras: EstimateExtras,
     settings: &RelightSettings,
 ) -> Result<EvalReport> {
     let truth = SceneTruth::read(scene)?;
-    let pose = match estimated_pose {
+    let pose = match extras.pose {
         Some(est) => Some(pose_errors(est, &Pose::read(scene_file(scene, "pose.json")?)?)),
         None => None,
     };
-    let [mirror, shiny, diffuse] = relighting_errors(estimate, &truth.env, &truth.camera, settings)?;
+    let est = relight(estimate, &truth.camera, settings)?;
+    let gt = relight(&truth.env, &truth.camera, settings)?;
+    let [mirror, shiny, diffuse] = compare_spheres(&est, &gt, &evaluation_region());
+    let split = match extras.confidence {
+        Some(confidence) => Some(seen_and_unseen(
+            &est,
+            &gt,
+            &mirror_directions(&truth.camera)?,
+            confidence,
+        )),
+        None => None,
+    };
     Ok(EvalReport {
         scene: scene.display().to_string(),
         mirror,
         shiny,
         diffuse,
         speckle: speckle(estimate),
+        artefacts: artefacts(estimate),
+        true_artefacts: artefacts(&truth.env),
+        mirror_seen: split.map(|s| s[0]),
+        mirror_unseen: split.map(|s| s[1]),
         pose,
     })
 }
@@ -366,6 +523,45 @@ mod tests {
         assert_eq!(speckle(&EnvMap::new(w, h, sun).unwrap()), [0.0; 3]);
     }
 
+    /// A 128 x 64 map of `base` with the texels of `spots` set to theirs.
+    fn map_with(base: [f32; 3], spots: &[(usize, usize, [f32; 3])]) -> EnvMap {
+        let mut texels = vec![base; 128 * 64];
+        for &(r, c, v) in spots {
+            texels[r * 128 + c] = v;
+        }
+        EnvMap::new(128, 64, texels).unwrap()
+    }
+
+    #[test]
+    fn artefacts_count_holes_spikes_and_off_colour_texels_alone() {
+        let one = 100.0 / (128.0 * 64.0);
+        let clean = artefacts(&map_with([0.5, 0.4, 0.3], &[]));
+        assert_eq!((clean.colour_pct, clean.dark_pct, clean.bright_pct), (0.0, 0.0, 0.0));
+        let grey = [0.5f32; 3];
+        let map = map_with(
+            grey,
+            &[
+                (10, 0, [0.04; 3]),
+                (20, 64, [6.0; 3]),
+                (30, 100, [0.7, 0.5, 0.3]),
+                (40, 50, [0.06; 3]),
+            ],
+        );
+        let found = artefacts(&map);
+        // A hole 12.5x darker (the one 8.3x darker is not), a spike 12x brighter, a reddish texel
+        // (chromaticity 0.467 against 0.333): one each. Column 0's neighbourhood wraps.
+        assert!((found.dark_pct - one).abs() < 1e-9, "{found:?}");
+        assert!((found.bright_pct - one).abs() < 1e-9, "{found:?}");
+        assert!((found.colour_pct - one).abs() < 1e-9, "{found:?}");
+        // A patch of another colour wider than half the window is no artefact, but its edge
+        // texels are counted where the neighbourhood's median is still the background's.
+        let patch: Vec<(usize, usize, [f32; 3])> = (30..36)
+            .flat_map(|r| (60..66).map(move |c| (r, c, [0.9, 0.3, 0.3])))
+            .collect();
+        let inside = artefacts(&map_with(grey, &patch));
+        assert!(inside.colour_pct < 36.0 * one, "{inside:?}");
+    }
+
     #[test]
     fn report_fields_are_the_contract() {
         let errors = SphereErrors {
@@ -378,12 +574,35 @@ mod tests {
             shiny: errors,
             diffuse: errors,
             speckle: [0.25, 0.0, 0.5],
+            artefacts: Artefacts {
+                colour_pct: 1.0,
+                dark_pct: 0.5,
+                bright_pct: 0.25,
+            },
+            true_artefacts: Artefacts {
+                colour_pct: 0.0,
+                dark_pct: 0.0,
+                bright_pct: 0.0,
+            },
+            mirror_seen: None,
+            mirror_unseen: None,
             pose: None,
         };
         assert_eq!(
             report.to_json_line(),
-            r#"{"scene":"s","mirror":{"angular_deg":1.0,"si_rmse":0.5},"shiny":{"angular_deg":1.0,"si_rmse":0.5},"diffuse":{"angular_deg":1.0,"si_rmse":0.5},"speckle":[0.25,0.0,0.5]}"#
+            r#"{"scene":"s","mirror":{"angular_deg":1.0,"si_rmse":0.5},"shiny":{"angular_deg":1.0,"si_rmse":0.5},"diffuse":{"angular_deg":1.0,"si_rmse":0.5},"speckle":[0.25,0.0,0.5],"artefacts":{"colour_pct":1.0,"dark_pct":0.5,"bright_pct":0.25},"true_artefacts":{"colour_pct":0.0,"dark_pct":0.0,"bright_pct":0.0}}"#
         );
+        report.mirror_seen = Some(RegionErrors {
+            angular_deg: 2.0,
+            share: 0.25,
+        });
+        report.mirror_unseen = Some(RegionErrors {
+            angular_deg: 4.0,
+            share: 0.75,
+        });
+        assert!(report.to_json_line().contains(
+            r#""mirror_seen":{"angular_deg":2.0,"share":0.25},"mirror_unseen":{"angular_deg":4.0,"share":0.75}"#
+        ));
         report.pose = Some(PoseErrors {
             rotation_deg: 1.0,
             axis_deg: 2.0,

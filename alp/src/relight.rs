@@ -137,6 +137,19 @@ pub fn sphere_camera(scene: &Camera) -> Result<Camera> {
     )?)
 }
 
+/// The direction each pixel of the mirror sphere reflects (row-major, at its centre ray; `None`
+/// off the sphere): which part of a map the mirror shows where.
+pub fn mirror_directions(scene: &Camera) -> Result<Vec<Option<Vec3>>> {
+    let camera = sphere_camera(scene)?;
+    let size = SPHERE_IMAGE_SIZE;
+    Ok((0..size * size)
+        .map(|p| {
+            let (origin, direction) = camera.primary_ray(p / size, p % size, Vec2::splat(0.5));
+            unit_sphere_normal(origin, direction).map(|n| direction - 2.0 * direction.dot(n) * n)
+        })
+        .collect())
+}
+
 /// The pixels the metrics look at: those whose centre ray hits the sphere at least
 /// [`SILHOUETTE_INSET_PX`] inside its silhouette (the same for every viewing direction).
 ///

@@ -108,3 +108,41 @@ fn a_brighter_copy_of_a_map_scores_zero() {
         assert!(e.angular_deg > 1.0 && e.si_rmse > 0.01, "{e:?}");
     }
 }
+
+#[test]
+fn the_mirror_splits_where_the_probe_saw_the_map() {
+    // The estimate is the truth above the horizon and wrong below; the probe "saw" the upper
+    // half. The seen part scores 0, the unseen part the whole error, and the shares add to the
+    // mirror's region (the pixels off the sphere's centre rays aside).
+    let truth: Vec<[f32; 3]> = (0..16 * 32).map(|i| [1.0, 0.5 + (i % 3) as f32 * 0.1, 0.3]).collect();
+    let estimate: Vec<[f32; 3]> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| if i < 8 * 32 { t } else { [t[2], t[0], t[1]] })
+        .collect();
+    let upper = EnvMap::new(
+        32,
+        16,
+        (0..16 * 32).map(|i| [if i < 8 * 32 { 1.0 } else { 0.0 }; 3]).collect(),
+    )
+    .unwrap();
+    let (truth, estimate) = (
+        EnvMap::new(32, 16, truth).unwrap(),
+        EnvMap::new(32, 16, estimate).unwrap(),
+    );
+    let camera = Camera::new(64, 48, 40.0, Vec3::new(0.0, 0.3, 1.0), Vec3::ZERO, Vec3::Y).expect("camera");
+    let settings = RelightSettings { spp: 4, seed: 0 };
+    let (est, gt) = (
+        relight(&estimate, &camera, &settings).unwrap(),
+        relight(&truth, &camera, &settings).unwrap(),
+    );
+    let directions = alp::relight::mirror_directions(&camera).unwrap();
+    // Within half a texel of the horizon the lookups blend both halves: the seen part's error
+    // is small, not 0.
+    let [seen, unseen] = alp::eval::seen_and_unseen(&est, &gt, &directions, &upper);
+    assert!(seen.angular_deg < 0.1 * unseen.angular_deg, "{seen:?} vs {unseen:?}");
+    assert!((seen.share + unseen.share - 1.0).abs() < 1e-9 && seen.share > 0.2 && unseen.share > 0.2);
+    let all_seen = EnvMap::constant(16, [1.0; 3]);
+    let [seen, unseen] = alp::eval::seen_and_unseen(&est, &gt, &directions, &all_seen);
+    assert_eq!((seen.share, unseen.share), (1.0, 0.0));
+}

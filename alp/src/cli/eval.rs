@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use render::RenderError;
 use render::envmap::EnvMap;
 use render::pose::Pose;
 
@@ -20,6 +21,10 @@ pub struct EvalArgs {
     /// An estimated pose.json, compared with the scene's pose.json.
     #[arg(long)]
     pub pose: Option<PathBuf>,
+    /// The estimate's confidence.exr: the mirror's error is also given where the probe saw the
+    /// map (confidence above one half) and where it did not.
+    #[arg(long)]
+    pub confidence: Option<PathBuf>,
     /// Samples per pixel of the relit spheres, a square.
     #[arg(long, default_value_t = crate::relight::DEFAULT_SPP)]
     pub spp: u32,
@@ -32,11 +37,26 @@ pub struct EvalArgs {
 pub fn run(args: &EvalArgs) -> Result<()> {
     let env = EnvMap::read(&args.env)?;
     let pose = args.pose.as_ref().map(Pose::read).transpose()?;
+    let confidence = match &args.confidence {
+        Some(path) => {
+            let map = EnvMap::read(path)?;
+            if map.radiance().iter().flatten().any(|v| !(0.0..=1.0).contains(v)) {
+                let rule = "a confidence map's values lie in [0, 1] (alp estimate's confidence.exr)";
+                return Err(RenderError::file(path, rule).into());
+            }
+            Some(map)
+        }
+        None => None,
+    };
     let settings = RelightSettings {
         spp: args.spp,
         seed: args.seed,
     };
-    let report = crate::eval::evaluate_scene(&args.scene, &env, pose.as_ref(), &settings)?;
+    let extras = crate::eval::EstimateExtras {
+        pose: pose.as_ref(),
+        confidence: confidence.as_ref(),
+    };
+    let report = crate::eval::evaluate_scene(&args.scene, &env, extras, &settings)?;
     println!("{}", report.to_json_line());
     Ok(())
 }
