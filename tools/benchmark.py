@@ -133,7 +133,7 @@ def summary(records, cmdline):
               "where it did not (means over the pixels of all scenes); map artefacts at 128 x 64 (share of texels whose chromaticity is "
               "0.08 off their 5 x 5 median, 10x darker, 10x brighter), the estimates' and the true maps'.", "",
               "| split | mirror seen / unseen (deg) | seen share | artefacts colour / dark / bright (%) | "
-              "true maps' (%) |", "|---|---|---|---|---|"]
+              "true maps' (%) | within 1 / 2 sigma (%) |", "|---|---|---|---|---|---|"]
     for s in splits:
         ok = [r for r in by[s] if not r.get("error")]
         # Pixel-weighted: a scene whose mirror the probe saw all of has no unseen error to average.
@@ -143,9 +143,11 @@ def summary(records, cmdline):
                              else None)
         art = lambda k: " / ".join(es.fmt(es.mean([r[k][f] for r in ok if r.get(k)])) for f in
                                    ("colour_pct", "dark_pct", "bright_pct"))
-        lines.append("| %s | %s / %s | %s | %s | %s |" % (
+        cover = " / ".join(es.fmt(es.mean([100.0 * r["uncertainty"][f] for r in ok if r.get("uncertainty")]), 1)
+                           for f in ("within_1_sigma", "within_2_sigma"))
+        lines.append("| %s | %s / %s | %s | %s | %s | %s |" % (
             s, es.fmt(part("mirror_seen", "angular_deg")), es.fmt(part("mirror_unseen", "angular_deg")),
-            es.fmt(part("mirror_seen", "share")), art("artefacts"), art("true_artefacts")))
+            es.fmt(part("mirror_seen", "share")), art("artefacts"), art("true_artefacts"), cover))
     for key, title in (("family", "probe family"), ("pose_kind", "pose kind"), ("lighting", "lighting"),
                        ("map", "map (real maps by name)")):
         for s in splits:

@@ -322,9 +322,11 @@ def sha256_files(paths, extra):
 
 def evaluate(alp, work, scene_dir, est_dir, spp, cache, alp_sha):
     env, pose = os.path.join(est_dir, "env.exr"), os.path.join(est_dir, "pose.json")
-    confidence = os.path.join(est_dir, "confidence.exr")
-    extra = ["--confidence", confidence] if os.path.isfile(confidence) else []
-    key = sha256_files([env, pose] + extra[1:], "%s|%d|%s" % (os.path.abspath(scene_dir), spp, alp_sha))
+    extra = []
+    for flag, name in (("--confidence", "confidence.exr"), ("--uncertainty", "uncertainty.exr")):
+        if os.path.isfile(os.path.join(est_dir, name)):
+            extra += [flag, os.path.join(est_dir, name)]
+    key = sha256_files([env, pose] + extra[1::2], "%s|%d|%s" % (os.path.abspath(scene_dir), spp, alp_sha))
     if key in cache:
         return dict(cache[key], eval_cached=True)
     out, wall, _, _ = run([alp, "eval", "--scene", scene_dir, "--env", env, "--pose", pose, "--spp", str(spp)] + extra,

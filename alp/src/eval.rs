@@ -188,6 +188,41 @@ pub fn seen_and_unseen(
     })
 }
 
+/// How often the truth lies within an estimate's stated uncertainty.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Coverage {
+    /// The share of texels and channels whose error is at most one
+    /// standard deviation (a calibrated Gaussian: 0.68).
+    pub within_1_sigma: f64,
+    /// Within two (0.95).
+    pub within_2_sigma: f64,
+}
+
+/// The [`Coverage`] of `uncertainty` (standard deviations at the
+/// estimate's size) over the error of `estimate` against `truth`, the truth
+/// box-filtered to the estimate's size.
+pub fn coverage(estimate: &EnvMap, truth: &EnvMap, uncertainty: &EnvMap) -> Coverage {
+    let (w, h) = (estimate.width(), estimate.height());
+    let flat: Vec<f64> = truth.radiance().iter().flatten().map(|&v| v as f64).collect();
+    let truth = resample(&flat, (truth.width(), truth.height()), (w, h));
+    let (mut one, mut two) = (0usize, 0usize);
+    let values = estimate
+        .radiance()
+        .iter()
+        .flatten()
+        .zip(uncertainty.radiance().iter().flatten());
+    for ((&e, &s), t) in values.zip(&truth) {
+        let error = (e as f64 - t).abs();
+        one += usize::from(error <= s as f64);
+        two += usize::from(error <= 2.0 * s as f64);
+    }
+    let n = truth.len().max(1) as f64;
+    Coverage {
+        within_1_sigma: one as f64 / n,
+        within_2_sigma: two as f64 / n,
+    }
+}
+
 /// Rows of the map the artefact shares are counted at (128 x 64 texels).
 pub const ARTEFACT_ROWS: usize = 64;
 /// A texel's neighbourhood for the artefact shares: a square this many texels wide.
@@ -373,6 +408,9 @@ pub struct EvalReport {
     /// The mirror sphere where it did not.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mirror_unseen: Option<RegionErrors>,
+    /// How often the truth lies within the estimate's uncertainty, when given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<Coverage>,
     /// Pose errors, when an estimated pose was given.
     #[serde(flatten)]
     pub pose: Option<PoseErrors>,
@@ -425,6 +463,8 @@ pub struct EstimateExtras<'a> {
     pub pose: Option<&'a Pose>,
     /// The estimate's confidence map, which splits the mirror's error into seen and unseen.
     pub confidence: Option<&'a EnvMap>,
+    /// The estimate's uncertainty (standard deviations at the map's size).
+    pub uncertainty: Option<&'a EnvMap>,
 }
 
 /// Evaluates an estimated env map (and optionally its pose and confidence) against a scene's truth.
@@ -461,6 +501,7 @@ pub fn evaluate_scene(
         true_artefacts: artefacts(&truth.env),
         mirror_seen: split.map(|s| s[0]),
         mirror_unseen: split.map(|s| s[1]),
+        uncertainty: extras.uncertainty.map(|u| coverage(estimate, &truth.env, u)),
         pose,
     })
 }
@@ -563,6 +604,18 @@ mod tests {
     }
 
     #[test]
+    fn coverage_counts_errors_within_one_and_two_deviations() {
+        let truth = map_with([1.0; 3], &[]);
+        let estimate = map_with([1.0; 3], &[(0, 0, [1.5; 3]), (0, 1, [3.0; 3])]);
+        let sigma = map_with([0.4; 3], &[]);
+        let c = coverage(&estimate, &truth, &sigma);
+        // Errors 0.5 (within two deviations, not one) and 2.0 (neither), three channels each.
+        let n = (128 * 64 * 3) as f64;
+        assert!((c.within_1_sigma - (n - 6.0) / n).abs() < 1e-12, "{c:?}");
+        assert!((c.within_2_sigma - (n - 3.0) / n).abs() < 1e-12, "{c:?}");
+    }
+
+    #[test]
     fn report_fields_are_the_contract() {
         let errors = SphereErrors {
             angular_deg: 1.0,
@@ -586,6 +639,7 @@ mod tests {
             },
             mirror_seen: None,
             mirror_unseen: None,
+            uncertainty: None,
             pose: None,
         };
         assert_eq!(

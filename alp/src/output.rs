@@ -130,7 +130,7 @@ pub fn write_image_and_preview(out: &Path, image: &render::image_io::RgbImage) -
 }
 
 /// Writes an estimate's files into `dir`: `env.exr`, `pose.json`,
-/// `confidence.exr`, `rerender.exr`, `mask_found.png`, `preview.png`,
+/// `confidence.exr`, `uncertainty.exr`, `rerender.exr`, `mask_found.png`, `preview.png`,
 /// `report.json` and `camera.json` (the camera it used, the EXIF's when
 /// none was given: for `alp insert` and `alp render`).
 pub(crate) fn write_estimate(dir: &Path, photo: &Photo, result: &Estimate) -> Result<()> {
@@ -139,6 +139,7 @@ pub(crate) fn write_estimate(dir: &Path, photo: &Photo, result: &Estimate) -> Re
     result.outline.write_png(dir.join("mask_found.png"))?;
     result.pose.write(dir.join("pose.json"))?;
     result.confidence.write(dir.join("confidence.exr"))?;
+    result.uncertainty.write(dir.join("uncertainty.exr"))?;
     result.rerender.write_exr(dir.join("rerender.exr"))?;
     preview(&photo.image, &result.rerender, &result.env.to_image()).write_png_preview(dir.join("preview.png"), 0.0)?;
     let json = serde_json::to_string_pretty(&result.report)

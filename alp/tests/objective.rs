@@ -479,3 +479,21 @@ fn bad_files_are_errors_that_name_the_line() {
     let e = Objective::from_file(&missing).unwrap_err();
     assert!(e.to_string().contains("missing.json"), "{e}");
 }
+
+#[test]
+fn a_file_declares_the_latitude_prior_and_its_bad_fields_are_errors() {
+    let text = r#"{"terms": [
+        {"term": "data_least_squares"},
+        {"term": "latitude_prior", "weight": 0.02}
+    ]}"#;
+    let objective = Objective::from_json_str(text, "objective.json").expect("a valid objective");
+    assert_eq!(
+        objective.names_in(Phase::Lighting),
+        ["data_least_squares", "latitude_prior"]
+    );
+    assert_file_error(
+        "{\"terms\": [\n  {\"term\": \"latitude_prior\", \"edge\": 0.1}\n]}",
+        2,
+        "only to `neighbour_smoothness`",
+    );
+}

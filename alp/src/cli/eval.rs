@@ -25,6 +25,10 @@ pub struct EvalArgs {
     /// map (confidence above one half) and where it did not.
     #[arg(long)]
     pub confidence: Option<PathBuf>,
+    /// The estimate's uncertainty.exr: how often the truth lies within one and two of its
+    /// standard deviations.
+    #[arg(long)]
+    pub uncertainty: Option<PathBuf>,
     /// Samples per pixel of the relit spheres, a square.
     #[arg(long, default_value_t = crate::relight::DEFAULT_SPP)]
     pub spp: u32,
@@ -52,9 +56,27 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         spp: args.spp,
         seed: args.seed,
     };
+    let uncertainty = match &args.uncertainty {
+        Some(path) => {
+            let map = EnvMap::read(path)?;
+            if (map.width(), map.height()) != (env.width(), env.height()) {
+                let rule = format!(
+                    "is {}x{} but the env map {}x{}: an uncertainty map has the map's size",
+                    map.width(),
+                    map.height(),
+                    env.width(),
+                    env.height()
+                );
+                return Err(RenderError::file(path, rule).into());
+            }
+            Some(map)
+        }
+        None => None,
+    };
     let extras = crate::eval::EstimateExtras {
         pose: pose.as_ref(),
         confidence: confidence.as_ref(),
+        uncertainty: uncertainty.as_ref(),
     };
     let report = crate::eval::evaluate_scene(&args.scene, &env, extras, &settings)?;
     println!("{}", report.to_json_line());

@@ -127,7 +127,7 @@ pub fn estimate_with(
     let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, output, &sizes, settings)?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
-    let (env, confidence) = fit.output_maps(sizes.work, out_size)?;
+    let maps = fit.output_maps(sizes.work, out_size, settings.lighting.uncertainty_scale)?;
     // The probe's outline at the found pose (`mask_found.png`): the sharp
     // camera's pixels it covers at least half of.
     let outline = {
@@ -174,8 +174,9 @@ pub fn estimate_with(
         wall_s: t0.elapsed().as_secs_f64(),
     };
     Ok(Estimate {
-        env,
-        confidence,
+        env: maps.env,
+        confidence: maps.confidence,
+        uncertainty: maps.uncertainty,
         // A known pose as given; a found one of the mesh as it is.
         pose: match (settings.known_pose, &along_y) {
             (Some(known), _) => known,

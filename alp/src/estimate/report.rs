@@ -19,6 +19,9 @@ pub struct Estimate {
     pub env: EnvMap,
     /// Sampling confidence of each texel in [0, 1] (grey), output size.
     pub confidence: EnvMap,
+    /// The standard deviation of each texel and channel (Laplace, scaled by
+    /// `LightingSettings::uncertainty_scale`), output size.
+    pub uncertainty: EnvMap,
     /// The probe's pose.
     pub pose: Pose,
     /// The photo re-rendered with the estimate.

@@ -16,8 +16,8 @@ use render::RenderError;
 use crate::error::Result;
 
 use super::{
-    Barycenter, Chamfer, DecayShape, LeastSquaresData, LightSmoothness, MaskL1, NeighbourSmoothness, Objective,
-    OrientationPrior, Phase, Phases, RgbL1, RgbVariant, Weight, WeightedTerm, Weighting,
+    Barycenter, Chamfer, DecayShape, LatitudePrior, LeastSquaresData, LightSmoothness, MaskL1, NeighbourSmoothness,
+    Objective, OrientationPrior, Phase, Phases, RgbL1, RgbVariant, Weight, WeightedTerm, Weighting,
 };
 
 #[derive(Deserialize)]
@@ -38,10 +38,11 @@ enum TermKind {
     LightSmoothness,
     DataLeastSquares,
     NeighbourSmoothness,
+    LatitudePrior,
 }
 
 impl TermKind {
-    const ALL: [(TermKind, &'static str); 8] = [
+    const ALL: [(TermKind, &'static str); 9] = [
         (TermKind::RgbL1, "rgb_l1"),
         (TermKind::MaskL1, "mask_l1"),
         (TermKind::Chamfer, "chamfer"),
@@ -50,6 +51,7 @@ impl TermKind {
         (TermKind::LightSmoothness, "light_smoothness"),
         (TermKind::DataLeastSquares, "data_least_squares"),
         (TermKind::NeighbourSmoothness, "neighbour_smoothness"),
+        (TermKind::LatitudePrior, "latitude_prior"),
     ];
 
     fn name(self) -> &'static str {
@@ -264,6 +266,7 @@ impl TermSpec {
                 })?;
                 term.weight(weight)
             }
+            TermKind::LatitudePrior => LatitudePrior.weight(weight),
         };
         Ok(match self.phases {
             None => term,
@@ -285,7 +288,8 @@ impl Objective {
     ///   {"term": "orientation", "weight": {"decay_to_zero": 0.1, "until": 1.0, "shape": "cosine"}},
     ///   {"term": "data_least_squares"},
     ///   {"term": "neighbour_smoothness", "edge": 0.05, "chroma": 1.0, "weight": 1e-2},
-    ///   {"term": "light_smoothness", "sigma_deg": 2.0, "directions": 1024, "weight": 1e-3}
+    ///   {"term": "light_smoothness", "sigma_deg": 2.0, "directions": 1024, "weight": 1e-3},
+    ///   {"term": "latitude_prior", "weight": 1e-3}
     /// ]}
     /// ```
     ///

@@ -38,7 +38,9 @@
 
 mod data_least_squares;
 mod file;
+mod latitude_prior;
 mod light_smoothness;
+mod map_prior;
 mod mask;
 mod neighbour_smoothness;
 mod pose_prior;
@@ -57,7 +59,9 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 
 pub use data_least_squares::{DataTerm, LeastSquaresData};
+pub use latitude_prior::{Band, Bands, LatitudePrior};
 pub use light_smoothness::LightSmoothness;
+pub use map_prior::{MapPrior, MapPriorOp};
 pub use mask::{Chamfer, MaskL1};
 pub use neighbour_smoothness::{
     DARK_LEVEL, LightingInputs, NeighbourSmoothness, Pair, Prior, PriorBasis, Smoothness, clipped_lights,
@@ -184,6 +188,20 @@ pub enum LeastSquaresForm {
     Data,
     /// The neighbour smoothness ([`NeighbourSmoothness`]).
     Smoothness(NeighbourSmoothness),
+    /// The latitude prior ([`LatitudePrior`]).
+    Latitude(LatitudePrior),
+}
+
+impl LeastSquaresForm {
+    /// The prior over the map that the form is at `weight` (relative to the
+    /// data term's) on `basis`; `None` for the data term.
+    pub fn prior(&self, basis: &PriorBasis, weight: f64) -> Option<Box<dyn MapPrior>> {
+        match self {
+            LeastSquaresForm::Data => None,
+            LeastSquaresForm::Smoothness(shape) => Some(Box::new(basis.prior(&shape.at_weight(weight)))),
+            LeastSquaresForm::Latitude(latitude) => Some(Box::new(latitude.bands(basis, weight))),
+        }
+    }
 }
 
 /// One term of the loss: a scalar recorded on the tape from the context.

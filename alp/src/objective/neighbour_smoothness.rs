@@ -8,12 +8,13 @@
 //! What it is built on ([`PriorBasis`]) the solve fixes once from its start
 //! and the data: the local levels, the data's scale and the clipped lights.
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use autodiff::{CustomOp, Var};
+use autodiff::Var;
 use render::colour::luminance;
 use render::transport::Transport;
 
+use super::map_prior::{MapPrior, MapPriorOp};
 use super::{DataTerm, Input, LeastSquaresForm, Phases, Term, TermContext};
 use crate::error::{Error, Result};
 
@@ -51,6 +52,12 @@ impl Smoothness {
             edge: 0.0,
             chroma: 1.0,
         }
+    }
+
+    /// The smoothness as a least-squares form and its weight.
+    pub fn form(&self) -> (LeastSquaresForm, f64) {
+        let shape = NeighbourSmoothness::charbonnier(self.edge).chroma(self.chroma);
+        (LeastSquaresForm::Smoothness(shape), self.weight)
     }
 
     /// The curvature of a neighbour pair's penalty in one channel of one
@@ -142,10 +149,10 @@ impl Term for NeighbourSmoothness {
                 ),
             ));
         }
-        let op = Arc::new(PriorOp {
-            prior: basis.prior(&self.at_weight(1.0)),
-            gradient: Mutex::default(),
-        });
+        let op = Arc::new(MapPriorOp::new(
+            "neighbour_smoothness",
+            basis.prior(&self.at_weight(1.0)),
+        ));
         Ok(Some(ctx.tape.custom(op, &[env.texels])))
     }
 }
@@ -315,16 +322,15 @@ pub struct Prior {
     pub chroma: f64,
 }
 
-impl Prior {
-    /// Returns the prior's value at the env map `x` (texel-major RGB) and
-    /// adds its gradient to `g`. A pair's penalty is `lambda area s` with
+impl MapPrior for Prior {
+    /// A pair's penalty is `lambda area s` with
     /// `s = q (3 m^2 + chroma |d - m|^2)` (`q` its relative factor, `d` its
     /// RGB difference, `m` the mean of `d`'s channels: `s = q |d|^2` at
     /// `chroma` 1) while that is small against `3 edge^2` (the pair's),
     /// and `lambda area 6 edge^2 (sqrt(1 + s / (3 edge^2)) - 1)` in
     /// general: the same at small differences, linear in `sqrt(s)` at
     /// large ones.
-    pub fn add_value_and_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
+    fn add_value_and_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
         let mut f = 0.0;
         for p in &self.pairs {
             let d: [f64; 3] = std::array::from_fn(|c| x[p.i * 3 + c] - x[p.j * 3 + c]);
@@ -353,9 +359,7 @@ impl Prior {
         f
     }
 
-    /// Per texel of `texels`, the prior's curvature in one channel at small
-    /// differences.
-    pub fn texel_curvature(&self, texels: usize) -> Vec<f64> {
+    fn texel_curvature(&self, texels: usize) -> Vec<f64> {
         let pair_curvature = (2.0 + 4.0 * self.chroma) / 3.0;
         let mut curvature = vec![0.0; texels];
         for p in &self.pairs {
@@ -366,50 +370,9 @@ impl Prior {
     }
 }
 
-/// The prior as one tape op over the map's texels.
-struct PriorOp {
-    prior: Prior,
-    /// The prior's gradient, a buffer reused from call to call.
-    gradient: Mutex<Vec<f64>>,
-}
-
-impl PriorOp {
-    /// The prior's value at `x`, its gradient left in `gradient`.
-    fn evaluate(&self, x: &[f64], gradient: &mut Vec<f64>) -> f64 {
-        gradient.clear();
-        gradient.resize(x.len(), 0.0);
-        self.prior.add_value_and_gradient(x, gradient)
-    }
-}
-
-impl CustomOp<f64> for PriorOp {
-    fn name(&self) -> &str {
-        "neighbour_smoothness"
-    }
-
-    fn output_len(&self, _input_lens: &[usize]) -> usize {
-        1
-    }
-
-    fn forward(&self, inputs: &[&[f64]], output: &mut [f64]) {
-        let mut gradient = self.gradient.lock().unwrap_or_else(|e| e.into_inner());
-        output[0] = self.evaluate(inputs[0], &mut gradient);
-    }
-
-    fn vjp(&self, inputs: &[&[f64]], _output: &[f64], grad_output: &[f64], grad_inputs: &mut [Option<&mut [f64]>]) {
-        let Some(grad) = grad_inputs[0].as_deref_mut() else {
-            return;
-        };
-        let mut gradient = self.gradient.lock().unwrap_or_else(|e| e.into_inner());
-        self.evaluate(inputs[0], &mut gradient);
-        grad.iter_mut()
-            .zip(gradient.iter())
-            .for_each(|(a, b)| *a += grad_output[0] * b);
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use super::super::map_prior::tests::check_prior;
     use super::*;
 
     #[test]
@@ -446,32 +409,8 @@ mod tests {
                 lambda: 0.7,
                 chroma,
             };
-            let mut g = vec![0.0; x.len()];
-            prior.add_value_and_gradient(&x, &mut g);
-            let h_step = 1e-6;
-            for k in 0..x.len() {
-                let at = |dx: f64| {
-                    let mut y = x.clone();
-                    y[k] += dx;
-                    prior.add_value_and_gradient(&y, &mut vec![0.0; x.len()])
-                };
-                let fd = (at(h_step) - at(-h_step)) / (2.0 * h_step);
-                assert!(
-                    (fd - g[k]).abs() < 1e-6 * fd.abs().max(1.0),
-                    "edge^2 {edge_sq}, chroma {chroma}, x[{k}]: {} vs {fd}",
-                    g[k]
-                );
-            }
-            // The tape op adds the same gradient, scaled by its upstream.
-            let op = Arc::new(PriorOp {
-                prior,
-                gradient: Mutex::default(),
-            });
-            let report = autodiff::gradcheck::gradcheck(&[autodiff::gradcheck::Input::Var(x.clone())], |t, v| {
-                t.custom(op.clone(), v) * 1.7
-            });
-            assert!(report.worst_rel_error < 1e-6, "edge^2 {edge_sq}: {report}");
-            pairs = Arc::into_inner(op).expect("the last reference").prior.pairs;
+            let what = format!("edge^2 {edge_sq}, chroma {chroma}");
+            pairs = check_prior(prior, &x, &what).pairs;
         }
     }
 

@@ -10,7 +10,7 @@ use render::transport::{PullBackScratch, Transport};
 
 use crate::error::{Error, Result};
 use crate::estimate::settings::LightingMethod;
-use crate::objective::{DataTerm, PriorBasis, Smoothness};
+use crate::objective::{DataTerm, LeastSquaresForm, MapPrior, PriorBasis, Smoothness};
 
 /// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
 /// doubling from `coarsest` (or `size` itself when not larger).
@@ -67,6 +67,18 @@ pub fn solve(
     settings: LightingSolve,
     x0: &[f64],
 ) -> Result<Solved> {
+    solve_with(transport, data, &[smoothness.form()], settings, x0)
+}
+
+/// [`solve`] with the priors of `priors` (each a form and its weight
+/// relative to the data term's) in place of the smoothness alone.
+pub fn solve_with(
+    transport: &Transport,
+    data: &DataTerm,
+    priors: &[(LeastSquaresForm, f64)],
+    settings: LightingSolve,
+    x0: &[f64],
+) -> Result<Solved> {
     assert_eq!(data.target.len(), transport.pixels, "solve: one target per pixel");
     assert_eq!(x0.len(), transport.unknowns(), "solve: the start has the wrong size");
     let weight = &data.weight;
@@ -77,11 +89,18 @@ pub fn solve(
         settings.relative_smoothness,
         settings.clipped_light_share,
     );
-    let prior = basis.prior(smoothness);
+    let priors: Vec<Box<dyn MapPrior>> = priors.iter().filter_map(|(f, w)| f.prior(&basis, *w)).collect();
     let data_norm = data.norm();
-    // The data term's curvature per unknown, and the prior's per texel (at
+    // The data term's curvature per unknown, and the priors' per texel (at
     // small differences; alike in every channel).
-    let prior_curvature = prior.texel_curvature(transport.width * transport.height);
+    let texels = transport.width * transport.height;
+    let mut prior_curvature = vec![0.0; texels];
+    for prior in &priors {
+        prior_curvature
+            .iter_mut()
+            .zip(prior.texel_curvature(texels))
+            .for_each(|(a, b)| *a += b);
+    }
     let curvature: Vec<f64> = (basis.data_curvature.iter().enumerate())
         .map(|(k, d)| d + prior_curvature[k / 3])
         .collect();
@@ -97,7 +116,7 @@ pub fn solve(
             &mut scratch,
         );
         let f = data.weighted_sq_sum(|p, c| rendered[p][c]) / data_norm;
-        f + prior.add_value_and_gradient(x, g)
+        f + priors.iter().map(|p| p.add_value_and_gradient(x, g)).sum::<f64>()
     };
     minimise(&mut objective, &curvature, &basis, settings, x0)
 }

@@ -67,6 +67,9 @@ pub(super) struct LightingFit {
     /// Each lighting term's value at the map, when asked for
     /// ([`FitRequest::term_values`]).
     pub(super) term_values: BTreeMap<String, f64>,
+    /// Each unknown's standard deviation ([`LightingTerms::posterior_sigma`]),
+    /// asked for with the term values.
+    pub(super) sigma: Vec<f64>,
 }
 
 impl LightingFit {
@@ -87,16 +90,28 @@ impl LightingFit {
         mean_weighted_sq_error(&self.rendered, &self.data)
     }
 
-    /// The solved map and the sampling confidence (grey) at the output
-    /// size `out`, from the working size `work`.
-    pub(super) fn output_maps(&self, work: (usize, usize), out: (usize, usize)) -> Result<(EnvMap, EnvMap)> {
+    /// The solved map, the sampling confidence (grey) and the map's
+    /// uncertainty (each standard deviation times `uncertainty_scale`, box
+    /// filtered as the map is) at the output size `out`, from the working
+    /// size `work`.
+    pub(super) fn output_maps(
+        &self,
+        work: (usize, usize),
+        out: (usize, usize),
+        uncertainty_scale: f64,
+    ) -> Result<OutputMaps> {
         let confidence: Vec<f64> = self
             .transport
             .confidence()
             .iter()
             .flat_map(|&c| [c as f64; 3])
             .collect();
-        Ok((output_map(&self.env, work, out)?, output_map(&confidence, work, out)?))
+        let sigma: Vec<f64> = self.sigma.iter().map(|s| s * uncertainty_scale).collect();
+        Ok(OutputMaps {
+            env: output_map(&self.env, work, out)?,
+            confidence: output_map(&confidence, work, out)?,
+            uncertainty: output_map(&sigma, work, out)?,
+        })
     }
 
     /// The re-render at the photo's size: the fit's pixels, the rest zero.
@@ -104,6 +119,16 @@ impl LightingFit {
         let channels: [Vec<f64>; 3] = std::array::from_fn(|c| self.rendered.iter().map(|p| p[c]).collect());
         self.hits.to_image([&channels[0], &channels[1], &channels[2]])
     }
+}
+
+/// The maps an estimate writes.
+pub(super) struct OutputMaps {
+    /// The env map.
+    pub(super) env: EnvMap,
+    /// The sampling confidence, grey.
+    pub(super) confidence: EnvMap,
+    /// The standard deviation of each texel and channel.
+    pub(super) uncertainty: EnvMap,
 }
 
 /// The env map sizes (width, height) of an estimate: the output map's solve
@@ -343,7 +368,7 @@ pub(super) fn fit_lighting(
     } = solved;
     let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];
     transport.apply(&env, &mut rendered);
-    let term_values = match term_values {
+    let (term_values, sigma) = match term_values {
         true => {
             let level = Level {
                 transport: &transport,
@@ -351,9 +376,12 @@ pub(super) fn fit_lighting(
                 settings: solve_settings,
                 start: &finest_start,
             };
-            terms.values(&level, &env, &scene)?
+            (
+                terms.values(&level, &env, &scene)?,
+                terms.posterior_sigma(&level, &rendered),
+            )
         }
-        false => BTreeMap::new(),
+        false => (BTreeMap::new(), Vec::new()),
     };
     Ok(LightingFit {
         hits: record.hits,
@@ -364,6 +392,7 @@ pub(super) fn fit_lighting(
         evaluations,
         termination,
         term_values,
+        sigma,
     })
 }
 

@@ -22,14 +22,14 @@ use render::posed::{PoseVars, pack_pose};
 use render::silhouette::ReferenceMask;
 use render::transport::{Transport, TransportOp};
 
-use super::least_squares::{LightingSolve, Solved, minimise, solve};
+use super::least_squares::{LightingSolve, Solved, minimise, solve_with};
 use crate::error::{Error, Result};
 use crate::estimate::photo::Photo;
 use crate::estimate::pose::hypotheses::front_facing;
 use crate::estimate::settings::LightingMethod;
 use crate::objective::{
     DataTerm, ImageTerms, LeastSquaresData, LeastSquaresForm, LightingInputs, NeighbourSmoothness, Objective, Phase,
-    PriorBasis, Smoothness, TermContext, Weighting, mask_mean_luminance,
+    PriorBasis, TermContext, Weighting, mask_mean_luminance,
 };
 
 /// The progress at which the lighting phase reads its terms' weights: it
@@ -42,11 +42,11 @@ const LIGHTING_PROGRESS: f64 = 1.0;
 const CURVATURE_FLOOR: f64 = 1e-3;
 
 /// How the terms are minimised.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 enum Plan {
-    /// The exact least-squares solve with this smoothness (the data term's
-    /// weight divided out).
-    Exact(Smoothness),
+    /// The exact least-squares solve with these priors (each weight over
+    /// the data term's).
+    Exact(Vec<(LeastSquaresForm, f64)>),
     /// The terms on a tape.
     Tape,
 }
@@ -145,9 +145,44 @@ impl LightingTerms {
     /// The map minimising the terms at `level`.
     pub(in crate::estimate) fn solve(&self, level: &Level, scene: &TapeScene) -> Result<Solved> {
         match &self.plan {
-            Plan::Exact(smoothness) => solve(level.transport, level.data, smoothness, level.settings, level.start),
+            Plan::Exact(priors) => solve_with(level.transport, level.data, priors, level.settings, level.start),
             Plan::Tape => self.solve_on_tape(level, scene),
         }
+    }
+
+    /// Per unknown of `level`'s map, the standard deviation a Laplace
+    /// approximation at the solution `env` (rendered as `rendered`) gives:
+    /// the photo's pixels read as independent Gaussians of the variance the
+    /// solution's residuals show, the lighting terms with a least-squares
+    /// form as its negative log posterior, and of its Hessian the diagonal
+    /// (the data term's curvature and the priors', floored as the
+    /// preconditioner's): `sigma_k = sqrt(2 D / (n H_k))`, `D` the data
+    /// term at the solution over its `n` weighted values.
+    pub(in crate::estimate) fn posterior_sigma(&self, level: &Level, rendered: &[[f64; 3]]) -> Vec<f64> {
+        let basis = PriorBasis::new(
+            level.transport,
+            level.data,
+            level.start,
+            level.settings.relative_smoothness,
+            level.settings.clipped_light_share,
+        );
+        let data = level.data;
+        let data_weight = (self.objective.terms_in(Phase::Lighting))
+            .filter(|t| t.term().least_squares_form() == Some(LeastSquaresForm::Data))
+            .map(|t| t.weight().at(LIGHTING_PROGRESS))
+            .sum::<f64>();
+        let prior = prior_curvature(&self.objective, &basis);
+        let scale = if data_weight > 0.0 { 1.0 / data_weight } else { 1.0 };
+        let curvature: Vec<f64> = (basis.data_curvature.iter().enumerate())
+            .map(|(k, d)| d + scale * prior[k / 3])
+            .collect();
+        let least = CURVATURE_FLOOR * curvature.iter().sum::<f64>() / curvature.len().max(1) as f64;
+        let residual = data.weighted_sq_sum(|p, c| rendered[p][c]) / data.norm();
+        let values = data.weight.iter().flatten().filter(|&&w| w > 0.0).count().max(1) as f64;
+        curvature
+            .into_iter()
+            .map(|h| (2.0 * residual / (values * h.max(least).max(1e-300))).sqrt())
+            .collect()
     }
 
     /// Each lighting term's unweighted value at the map `env`, solved at
@@ -191,28 +226,46 @@ impl LightingTerms {
     }
 }
 
-/// The exact solve's smoothness when every lighting term of non-zero
-/// weight has a form it covers: the data term once, the smoothness at most
-/// once (its weight over the data's).
-fn exact_plan(objective: &Objective) -> Option<Smoothness> {
-    let (mut data, mut smoothness) = (None, None);
+/// Per texel, the curvature of the lighting terms with a prior's
+/// least-squares form on `basis` (in one channel, at small differences).
+fn prior_curvature(objective: &Objective, basis: &PriorBasis) -> Vec<f64> {
+    let texels = basis.width * basis.height;
+    let mut curvature = vec![0.0; texels];
+    for t in objective.terms_in(Phase::Lighting) {
+        let weight = t.weight().at(LIGHTING_PROGRESS);
+        if let Some(prior) = t.term().least_squares_form().and_then(|f| f.prior(basis, weight)) {
+            curvature
+                .iter_mut()
+                .zip(prior.texel_curvature(texels))
+                .for_each(|(a, b)| *a += b);
+        }
+    }
+    curvature
+}
+
+/// The exact solve's priors when every lighting term of non-zero weight
+/// has a form it covers: the data term once at a positive weight, each
+/// prior at most once (its weight over the data's).
+fn exact_plan(objective: &Objective) -> Option<Vec<(LeastSquaresForm, f64)>> {
+    let (mut data, mut priors) = (None, Vec::<(LeastSquaresForm, f64)>::new());
     for t in objective.terms_in(Phase::Lighting) {
         let weight = t.weight().at(LIGHTING_PROGRESS);
         // A term at weight 0 is left out of the total (Objective::evaluate).
         if weight == 0.0 {
             continue;
         }
-        match t.term().least_squares_form()? {
+        let form = t.term().least_squares_form()?;
+        let repeated = priors
+            .iter()
+            .any(|(f, _)| std::mem::discriminant(f) == std::mem::discriminant(&form));
+        match form {
             LeastSquaresForm::Data if data.is_none() && weight > 0.0 => data = Some(weight),
-            LeastSquaresForm::Smoothness(s) if smoothness.is_none() => smoothness = Some((s, weight)),
+            LeastSquaresForm::Smoothness(_) | LeastSquaresForm::Latitude(_) if !repeated => priors.push((form, weight)),
             _ => return None,
         }
     }
     let data = data?;
-    Some(match smoothness {
-        Some((shape, weight)) => shape.at_weight(weight / data),
-        None => Smoothness::quadratic(0.0),
-    })
+    Some(priors.into_iter().map(|(f, w)| (f, w / data)).collect())
 }
 
 /// Records the lighting terms at a map on a tape.
@@ -263,18 +316,10 @@ impl<'a> Recorder<'a> {
     }
 
     /// The preconditioner's curvature per unknown: the data term's and the
-    /// neighbour smoothness terms', at least a small share of their mean.
+    /// priors' with a least-squares form, at least a small share of their mean.
     fn curvature(&self) -> Vec<f64> {
         let basis = &self.inputs.basis;
-        let texels = self.size.0 * self.size.1;
-        let mut prior = vec![0.0; texels];
-        for t in self.terms.objective.terms_in(Phase::Lighting) {
-            if let Some(LeastSquaresForm::Smoothness(shape)) = t.term().least_squares_form() {
-                let weight = t.weight().at(LIGHTING_PROGRESS);
-                let curvature = basis.prior(&shape.at_weight(weight)).texel_curvature(texels);
-                prior.iter_mut().zip(curvature).for_each(|(a, b)| *a += b);
-            }
-        }
+        let prior = prior_curvature(&self.terms.objective, basis);
         let known: Vec<f64> = (basis.data_curvature.iter().enumerate())
             .map(|(k, d)| d + prior[k / 3])
             .collect();
@@ -321,7 +366,7 @@ mod tests {
     use render::image_io::{Mask, RgbImage};
 
     use super::*;
-    use crate::objective::{LightSmoothness, RgbL1};
+    use crate::objective::{LatitudePrior, LightSmoothness, RgbL1};
 
     /// A photo of `w x h` pixels (all the probe's), its pixel `p` reading
     /// its texel and 40 % of the next one's on an 8 x 4 map whose truth
@@ -395,6 +440,56 @@ mod tests {
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() < 1e-4 * scale, "quadratic: exact {x}, tape {y}");
         }
+    }
+
+    #[test]
+    fn the_posterior_is_tighter_where_the_photo_tells_more() {
+        let (_, transport, data, x0) = scene();
+        let terms = LightingTerms::compile(Arc::new(Objective::paper_default()), LightingMethod::LeastSquares).unwrap();
+        let env = solve_with(&terms);
+        let settings = LightingSolve {
+            relative_smoothness: true,
+            floor_of_level: 0.02,
+            clipped_light_share: 0.5,
+            max_iters: 2000,
+            method: LightingMethod::LeastSquares,
+        };
+        let level = Level {
+            transport: &transport,
+            data: &data,
+            settings,
+            start: &x0,
+        };
+        let mut rendered = vec![[0.0; 3]; transport.pixels];
+        transport.apply(&env, &mut rendered);
+        let sigma = terms.posterior_sigma(&level, &rendered);
+        assert_eq!(sigma.len(), env.len());
+        assert!(sigma.iter().all(|s| s.is_finite() && *s > 0.0), "{sigma:?}");
+        // A texel's deviation falls as its data curvature rises.
+        let told = transport.weighted_column_norms(&data.weight);
+        let (most, least) = (argmax(&told), argmax(&told.iter().map(|c| -c).collect::<Vec<_>>()));
+        assert!(sigma[most] < sigma[least], "{} vs {}", sigma[most], sigma[least]);
+    }
+
+    fn argmax(v: &[f64]) -> usize {
+        (0..v.len()).max_by(|&a, &b| v[a].total_cmp(&v[b])).expect("values")
+    }
+
+    #[test]
+    fn the_latitude_prior_compiles_to_the_exact_solve_and_moves_the_map() {
+        let objective = Arc::new(Objective::paper_default().term(LatitudePrior.weight(0.3)));
+        let exact = LightingTerms::compile(objective.clone(), LightingMethod::LeastSquares).expect("terms");
+        let tape = LightingTerms::compile(objective, LightingMethod::Tape).expect("terms");
+        assert!(exact.is_exact());
+        let (a, b) = (solve_with(&exact), solve_with(&tape));
+        let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!((x - y).abs() < 1e-4 * scale, "unknown {k}: exact {x}, tape {y}");
+        }
+        let default = Arc::new(Objective::paper_default());
+        let default = solve_with(&LightingTerms::compile(default, LightingMethod::LeastSquares).unwrap());
+        let moved = a.iter().zip(&default).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        assert!(moved > 1e-3 * scale, "the map moved {moved}");
     }
 
     #[test]
