@@ -62,7 +62,7 @@ def run_scene(args, split, scene_dir, cache):
     os.makedirs(os.path.dirname(est_dir), exist_ok=True)
     rec = {"split": split, "scene": name, "family": meta["family"], "orientation": meta["orientation"],
            "pose_kind": meta["pose_kind"], "tilt_deg": meta["tilt_deg"], "lighting": meta["lighting"],
-           "map": meta["light"].get("source", meta["lighting"]),
+           "map": meta["light"].get("source") or "procedural " + meta["lighting"],
            "label": meta["probe"].get("label"), "metal": meta["probe"].get("metal"),
            "diameter_mm": meta["probe"]["diameter_mm"], "triangles": meta["probe"]["triangles"],
            "probe_px": meta["camera"]["probe_px"], "elevation_deg": meta["camera"]["elevation_deg"],

@@ -127,7 +127,7 @@ pub fn estimate_with(
     let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, output, &sizes, settings)?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
-    let maps = fit.output_maps(sizes.work, out_size, settings.lighting.uncertainty_scale)?;
+    let maps = fit.output_maps(sizes.work, out_size, &settings.lighting)?;
     // The probe's outline at the found pose (`mask_found.png`): the sharp
     // camera's pixels it covers at least half of.
     let outline = {

@@ -2,29 +2,30 @@
 //! elevation (sky, horizon, ground) than with azimuth, so a texel the photo
 //! tells little of leans towards what the seen part of its row shows.
 //!
-//! Per channel, with `m_r(x)` the row's seen level -- the mean of its
-//! texels weighted by how much the photo tells of each (its data curvature
-//! relative to the best-seen texel's, `c_t`) over their start level (so
+//! Per channel, with `m_r` the row's seen level in the solve's start -- the
+//! mean of its texels weighted by how much the photo tells of each (its
+//! data curvature relative to the best-seen texel's) over their level (so
 //! that a light in the row does not lift the rest) -- the prior is
 //!
 //! ```text
-//! lambda sum_r area_r q_r sum_{t in r} (x_t - m_r(x))^2
+//! lambda sum_r area_r q_r sum_{t in r} (x_t - m_r)^2
 //! ```
 //!
 //! with `q_r` the row's relative factor (differences count against its
 //! level, as the smoothness's do) and `lambda` the smoothness's scale. Its
 //! curvature is alike for every texel, so it moves a texel in proportion to
-//! how little the data tell of it (their curvature against its). The lights
-//! brighter than the sensor are left out. Not in the default objective; its
-//! train-split figures are in results 19.
-
-use std::sync::Arc;
+//! how little the data tell of it (their curvature against its). `m_r` is a
+//! constant of the solve (the start is the coarser level's solution): were
+//! it the current map's, the few texels that set it would answer for the
+//! whole row. The lights brighter than the sensor are left out. Not in the
+//! default objective: on the train split it costs every sphere, the lights'
+//! energy most (docs/results/benchmark.md 19.2).
 
 use autodiff::Var;
 
-use super::map_prior::{MapPrior, MapPriorOp};
+use super::map_prior::{MapPrior, record_map_prior};
 use super::{Input, LeastSquaresForm, Phases, PriorBasis, Term, TermContext};
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// The latitude prior as a declared term of the lighting phase.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -52,6 +53,8 @@ impl LatitudePrior {
             }
             let beta: Vec<f64> = texels.clone().map(|t| seen_weight(t) / total).collect();
             let level: f64 = texels.clone().zip(&beta).map(|(t, b)| b * basis.level[t]).sum();
+            let target: [f64; 3] =
+                std::array::from_fn(|c| texels.clone().zip(&beta).map(|(t, b)| b * basis.start[3 * t + c]).sum());
             let relative = match basis.relative {
                 true => ((basis.mean_level + floor) / (level + floor)).powi(2),
                 false => 1.0,
@@ -61,7 +64,7 @@ impl LatitudePrior {
             rows.push(Band {
                 start: r * w,
                 scale: lambda * area * relative,
-                beta,
+                target,
                 held,
             });
         }
@@ -87,21 +90,7 @@ impl Term for LatitudePrior {
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {
-        let (Some(env), Some(lighting)) = (ctx.env, ctx.lighting) else {
-            return Ok(None);
-        };
-        let basis = &lighting.basis;
-        if (env.width, env.height) != (basis.width, basis.height) {
-            return Err(Error::invalid(
-                "latitude_prior",
-                format!(
-                    "the map on the tape is {}x{} but the solve's basis {}x{}",
-                    env.width, env.height, basis.width, basis.height
-                ),
-            ));
-        }
-        let op = Arc::new(MapPriorOp::new("latitude_prior", self.bands(basis, 1.0)));
-        Ok(Some(ctx.tape.custom(op, &[env.texels])))
+        record_map_prior(ctx, "latitude_prior", |basis| self.bands(basis, 1.0))
     }
 }
 
@@ -111,8 +100,8 @@ pub struct Band {
     start: usize,
     /// `lambda area q` of the row.
     scale: f64,
-    /// Each texel's share of the row's seen level (summing to 1).
-    beta: Vec<f64>,
+    /// The row's seen level in the start, per channel.
+    target: [f64; 3],
     /// 1 for a texel the prior holds, 0 for a free light.
     held: Vec<f64>,
 }
@@ -127,20 +116,12 @@ impl MapPrior for Bands {
     fn add_value_and_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
         let mut f = 0.0;
         for band in &self.rows {
-            let at = |k: usize, c: usize| x[3 * (band.start + k) + c];
-            let n = band.beta.len();
-            for c in 0..3 {
-                let m: f64 = (0..n).map(|k| band.beta[k] * at(k, c)).sum();
-                // sum_t held_t (x_t - m): what m's own dependence on x carries back.
-                let mut pull = 0.0;
-                for k in 0..n {
-                    let d = at(k, c) - m;
-                    f += band.scale * band.held[k] * d * d;
-                    pull += band.held[k] * d;
-                    g[3 * (band.start + k) + c] += 2.0 * band.scale * band.held[k] * d;
-                }
-                for k in 0..n {
-                    g[3 * (band.start + k) + c] -= 2.0 * band.scale * band.beta[k] * pull;
+            for (k, held) in band.held.iter().enumerate() {
+                let t = band.start + k;
+                for c in 0..3 {
+                    let d = x[3 * t + c] - band.target[c];
+                    f += band.scale * held * d * d;
+                    g[3 * t + c] += 2.0 * band.scale * held * d;
                 }
             }
         }
@@ -163,8 +144,23 @@ mod tests {
     use super::super::map_prior::tests::check_prior;
     use super::*;
 
-    /// A 6 x 3 basis whose middle row is seen on its left half only, with
-    /// one free light there; the top row unseen.
+    /// A 6 x 3 map of 2 with a light of 40 in the middle row and its right
+    /// half at `right`.
+    fn map(right: f64) -> Vec<f64> {
+        (0..18)
+            .flat_map(|t| {
+                let v = match (t / 6, t % 6) {
+                    (1, 1) => 40.0,
+                    (1, c) if c >= 3 => right,
+                    _ => 2.0,
+                };
+                [v; 3]
+            })
+            .collect()
+    }
+
+    /// A 6 x 3 basis from [`map`]`(2)` whose middle row is seen on its left
+    /// half only, with one free light there; the top row unseen.
     fn basis() -> PriorBasis {
         let (w, h) = (6, 3);
         let told = |t: usize| match (t / w, t % w) {
@@ -173,6 +169,7 @@ mod tests {
             _ => 0.0,
         };
         PriorBasis {
+            start: map(2.0),
             width: w,
             height: h,
             level: (0..w * h).map(|t| 0.5 + 0.1 * (t % 4) as f64).collect(),
@@ -195,21 +192,9 @@ mod tests {
         let basis = basis();
         let bands = LatitudePrior.bands(&basis, 1.0);
         // The top row holds no seen texel: no band. The middle row's seen level is its seen
-        // texels' (the free light left out): a map that is 2 there and 5 on the unseen
-        // right half costs, and moving the right half to 2 removes the cost.
+        // texels' in the start (the free light left out): a map that is 2 there and 5 on the
+        // unseen right half costs, and moving the right half to 2 removes the cost.
         assert_eq!(bands.rows.len(), 2);
-        let map = |right: f64| -> Vec<f64> {
-            (0..18)
-                .flat_map(|t| {
-                    let v = match (t / 6, t % 6) {
-                        (1, 1) => 40.0,
-                        (1, c) if c >= 3 => right,
-                        _ => 2.0,
-                    };
-                    [v; 3]
-                })
-                .collect()
-        };
         let value = |x: &[f64]| bands.add_value_and_gradient(x, &mut vec![0.0; x.len()]);
         assert!(value(&map(5.0)) > 0.0);
         assert!(value(&map(2.0)).abs() < 1e-12, "{}", value(&map(2.0)));

@@ -2,9 +2,12 @@
 //! lighting solve's priors: the neighbour smoothness, the latitude prior),
 //! and the tape op that records one.
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
-use autodiff::CustomOp;
+use autodiff::{CustomOp, Var};
+
+use super::{PriorBasis, TermContext};
+use crate::error::{Error, Result};
 
 /// A prior over an env map (texel-major RGB).
 pub trait MapPrior: Send + Sync {
@@ -14,6 +17,31 @@ pub trait MapPrior: Send + Sync {
     /// Per texel of the map's `texels`, the prior's curvature in one
     /// channel (at small differences, for the solve's preconditioner).
     fn texel_curvature(&self, texels: usize) -> Vec<f64>;
+}
+
+/// The term `name`'s value on `ctx`'s tape: the prior `make` builds on the
+/// lighting solve's basis, over the map on the tape (`None` where the phase
+/// holds no map or no basis).
+pub fn record_map_prior<'t, P: MapPrior + 'static>(
+    ctx: &TermContext<'_, 't>,
+    name: &'static str,
+    make: impl FnOnce(&PriorBasis) -> P,
+) -> Result<Option<Var<'t, f64>>> {
+    let (Some(env), Some(lighting)) = (ctx.env, ctx.lighting) else {
+        return Ok(None);
+    };
+    let basis = &lighting.basis;
+    if (env.width, env.height) != (basis.width, basis.height) {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "the map on the tape is {}x{} but the solve's basis {}x{}",
+                env.width, env.height, basis.width, basis.height
+            ),
+        ));
+    }
+    let op = Arc::new(MapPriorOp::new(name, make(basis)));
+    Ok(Some(ctx.tape.custom(op, &[env.texels])))
 }
 
 /// A [`MapPrior`] as one tape op over the map's texels, named for reports.
@@ -75,8 +103,6 @@ impl<P: MapPrior> CustomOp<f64> for MapPriorOp<P> {
 
 #[cfg(test)]
 pub(crate) mod tests {
-    use std::sync::Arc;
-
     use super::*;
 
     /// Checks `prior`'s gradient against central differences at `x`, and the

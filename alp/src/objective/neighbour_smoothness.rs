@@ -14,7 +14,7 @@ use autodiff::Var;
 use render::colour::luminance;
 use render::transport::Transport;
 
-use super::map_prior::{MapPrior, MapPriorOp};
+use super::map_prior::{MapPrior, record_map_prior};
 use super::{DataTerm, Input, LeastSquaresForm, Phases, Term, TermContext};
 use crate::error::{Error, Result};
 
@@ -135,25 +135,8 @@ impl Term for NeighbourSmoothness {
     }
 
     fn evaluate<'t>(&self, ctx: &TermContext<'_, 't>) -> Result<Option<Var<'t, f64>>> {
-        let (Some(env), Some(lighting)) = (ctx.env, ctx.lighting) else {
-            return Ok(None);
-        };
         self.validate()?;
-        let basis = &lighting.basis;
-        if (env.width, env.height) != (basis.width, basis.height) {
-            return Err(Error::invalid(
-                "neighbour_smoothness",
-                format!(
-                    "the map on the tape is {}x{} but the solve's basis {}x{}",
-                    env.width, env.height, basis.width, basis.height
-                ),
-            ));
-        }
-        let op = Arc::new(MapPriorOp::new(
-            "neighbour_smoothness",
-            basis.prior(&self.at_weight(1.0)),
-        ));
-        Ok(Some(ctx.tape.custom(op, &[env.texels])))
+        record_map_prior(ctx, "neighbour_smoothness", |basis| basis.prior(&self.at_weight(1.0)))
     }
 }
 
@@ -166,6 +149,8 @@ pub struct PriorBasis {
     pub width: usize,
     /// The map's rows.
     pub height: usize,
+    /// The start map (texel-major RGB).
+    pub start: Vec<f64>,
     /// The start's luminance per texel.
     pub level: Vec<f64>,
     /// The mean of `level`.
@@ -201,6 +186,7 @@ impl PriorBasis {
         let mean_level = level.iter().sum::<f64>() / level.len() as f64;
         let column_norms = transport.weighted_column_norms(&data.weight);
         PriorBasis {
+            start: start.to_vec(),
             width: transport.width,
             height: transport.height,
             relative,

@@ -91,14 +91,14 @@ impl LightingFit {
     }
 
     /// The solved map, the sampling confidence (grey) and the map's
-    /// uncertainty (each standard deviation times `uncertainty_scale`, box
-    /// filtered as the map is) at the output size `out`, from the working
-    /// size `work`.
+    /// uncertainty (each deviation times `LightingSettings::uncertainty_scale`,
+    /// box filtered as the map is) at the output size `out`, from the
+    /// working size `work`.
     pub(super) fn output_maps(
         &self,
         work: (usize, usize),
         out: (usize, usize),
-        uncertainty_scale: f64,
+        lighting: &LightingSettings,
     ) -> Result<OutputMaps> {
         let confidence: Vec<f64> = self
             .transport
@@ -106,7 +106,7 @@ impl LightingFit {
             .iter()
             .flat_map(|&c| [c as f64; 3])
             .collect();
-        let sigma: Vec<f64> = self.sigma.iter().map(|s| s * uncertainty_scale).collect();
+        let sigma: Vec<f64> = self.sigma.iter().map(|s| s * lighting.uncertainty_scale).collect();
         Ok(OutputMaps {
             env: output_map(&self.env, work, out)?,
             confidence: output_map(&confidence, work, out)?,

@@ -400,16 +400,21 @@ mod tests {
         (photo, transport, Arc::new(data), vec![1.0; n * 3])
     }
 
-    fn solve_with(terms: &LightingTerms) -> Vec<f64> {
-        let (photo, transport, data, x0) = scene();
-        let pixels: Vec<u32> = (0..data.target.len() as u32).collect();
-        let settings = LightingSolve {
+    /// The tests' solve settings.
+    fn settings() -> LightingSolve {
+        LightingSolve {
             relative_smoothness: true,
             floor_of_level: 0.02,
             clipped_light_share: 0.5,
             max_iters: 2000,
             method: LightingMethod::LeastSquares,
-        };
+        }
+    }
+
+    fn solve_with(terms: &LightingTerms) -> Vec<f64> {
+        let (photo, transport, data, x0) = scene();
+        let pixels: Vec<u32> = (0..data.target.len() as u32).collect();
+        let settings = settings();
         let scene = TapeScene::new(&photo, &Pose::IDENTITY, &pixels, 5);
         let level = Level {
             transport: &transport,
@@ -447,17 +452,10 @@ mod tests {
         let (_, transport, data, x0) = scene();
         let terms = LightingTerms::compile(Arc::new(Objective::paper_default()), LightingMethod::LeastSquares).unwrap();
         let env = solve_with(&terms);
-        let settings = LightingSolve {
-            relative_smoothness: true,
-            floor_of_level: 0.02,
-            clipped_light_share: 0.5,
-            max_iters: 2000,
-            method: LightingMethod::LeastSquares,
-        };
         let level = Level {
             transport: &transport,
             data: &data,
-            settings,
+            settings: settings(),
             start: &x0,
         };
         let mut rendered = vec![[0.0; 3]; transport.pixels];
