@@ -67,7 +67,7 @@ pub(super) struct LightingFit {
     /// Each lighting term's value at the map, when asked for
     /// ([`FitRequest::term_values`]).
     pub(super) term_values: BTreeMap<String, f64>,
-    /// Each unknown's standard deviation ([`LightingTerms::posterior_sigma`]),
+    /// Each unknown's standard deviation ([`LightingTerms::account`]),
     /// asked for with the term values.
     pub(super) sigma: Vec<f64>,
 }
@@ -376,10 +376,8 @@ pub(super) fn fit_lighting(
                 settings: solve_settings,
                 start: &finest_start,
             };
-            (
-                terms.values(&level, &env, &scene)?,
-                terms.posterior_sigma(&level, &rendered),
-            )
+            let account = terms.account(&level, &env, &rendered, &scene)?;
+            (account.values, account.sigma)
         }
         false => (BTreeMap::new(), Vec::new()),
     };

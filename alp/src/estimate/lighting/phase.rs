@@ -150,52 +150,23 @@ impl LightingTerms {
         }
     }
 
-    /// Per unknown of `level`'s map, the standard deviation a Laplace
-    /// approximation at the solution `env` (rendered as `rendered`) gives:
-    /// the photo's pixels read as independent Gaussians of the variance the
-    /// solution's residuals show, the lighting terms with a least-squares
-    /// form as its negative log posterior, and of its Hessian the diagonal
-    /// (the data term's curvature and the priors', floored as the
-    /// preconditioner's): `sigma_k = sqrt(2 D / (n H_k))`, `D` the data
-    /// term at the solution over its `n` weighted values.
-    pub(in crate::estimate) fn posterior_sigma(&self, level: &Level, rendered: &[[f64; 3]]) -> Vec<f64> {
-        let basis = PriorBasis::new(
-            level.transport,
-            level.data,
-            level.start,
-            level.settings.relative_smoothness,
-            level.settings.clipped_light_share,
-        );
-        let data = level.data;
-        let data_weight = (self.objective.terms_in(Phase::Lighting))
-            .filter(|t| t.term().least_squares_form() == Some(LeastSquaresForm::Data))
-            .map(|t| t.weight().at(LIGHTING_PROGRESS))
-            .sum::<f64>();
-        let prior = prior_curvature(&self.objective, &basis);
-        let scale = if data_weight > 0.0 { 1.0 / data_weight } else { 1.0 };
-        let curvature: Vec<f64> = (basis.data_curvature.iter().enumerate())
-            .map(|(k, d)| d + scale * prior[k / 3])
-            .collect();
-        let least = CURVATURE_FLOOR * curvature.iter().sum::<f64>() / curvature.len().max(1) as f64;
-        let residual = data.weighted_sq_sum(|p, c| rendered[p][c]) / data.norm();
-        let values = data.weight.iter().flatten().filter(|&&w| w > 0.0).count().max(1) as f64;
-        curvature
-            .into_iter()
-            .map(|h| (2.0 * residual / (values * h.max(least).max(1e-300))).sqrt())
-            .collect()
-    }
-
-    /// Each lighting term's unweighted value at the map `env`, solved at
-    /// `level`.
-    pub(in crate::estimate) fn values(
+    /// The lighting terms at the map `env` solved at `level` (rendered as
+    /// `rendered`): each term's unweighted value and each unknown's
+    /// deviation ([`Recorder::posterior_sigma`]).
+    pub(in crate::estimate) fn account(
         &self,
         level: &Level,
         env: &[f64],
+        rendered: &[[f64; 3]],
         scene: &TapeScene,
-    ) -> Result<BTreeMap<String, f64>> {
+    ) -> Result<Account> {
         let recorder = Recorder::new(self, level, scene)?;
         let tape = Tape::new();
-        Ok(recorder.record(&tape, env)?.1.values())
+        let values = recorder.record(&tape, env)?.1.values();
+        Ok(Account {
+            values,
+            sigma: recorder.posterior_sigma(rendered),
+        })
     }
 
     fn solve_on_tape(&self, level: &Level, scene: &TapeScene) -> Result<Solved> {
@@ -268,6 +239,14 @@ fn exact_plan(objective: &Objective) -> Option<Vec<(LeastSquaresForm, f64)>> {
     Some(priors.into_iter().map(|(f, w)| (f, w / data)).collect())
 }
 
+/// What [`LightingTerms::account`] tells of a solved map.
+pub(in crate::estimate) struct Account {
+    /// Each lighting term's unweighted value.
+    pub(in crate::estimate) values: BTreeMap<String, f64>,
+    /// Each unknown's standard deviation.
+    pub(in crate::estimate) sigma: Vec<f64>,
+}
+
 /// Records the lighting terms at a map on a tape.
 struct Recorder<'a> {
     terms: &'a LightingTerms,
@@ -315,16 +294,46 @@ impl<'a> Recorder<'a> {
         })
     }
 
-    /// The preconditioner's curvature per unknown: the data term's and the
-    /// priors' with a least-squares form, at least a small share of their mean.
+    /// The weight of the data term (1 when the objective has none: the
+    /// curvature then still scales by the photo's).
+    fn data_weight(&self) -> f64 {
+        let weight = (self.terms.objective.terms_in(Phase::Lighting))
+            .filter(|t| t.term().least_squares_form() == Some(LeastSquaresForm::Data))
+            .map(|t| t.weight().at(LIGHTING_PROGRESS))
+            .sum::<f64>();
+        if weight > 0.0 { weight } else { 1.0 }
+    }
+
+    /// The objective's curvature per unknown: the data term's and the
+    /// priors' with a least-squares form, at least a small share of their
+    /// mean (the preconditioner's).
     fn curvature(&self) -> Vec<f64> {
         let basis = &self.inputs.basis;
         let prior = prior_curvature(&self.terms.objective, basis);
+        let data_weight = self.data_weight();
         let known: Vec<f64> = (basis.data_curvature.iter().enumerate())
-            .map(|(k, d)| d + prior[k / 3])
+            .map(|(k, d)| data_weight * d + prior[k / 3])
             .collect();
         let least = CURVATURE_FLOOR * known.iter().sum::<f64>() / known.len().max(1) as f64;
         known.into_iter().map(|h| h.max(least)).collect()
+    }
+
+    /// Per unknown, the standard deviation a Laplace approximation at the
+    /// solution (rendered as `rendered`) gives: the photo's pixels read as
+    /// independent Gaussians of the variance the solution's residuals show,
+    /// the objective as the negative log posterior on that scale, and of its
+    /// Hessian the diagonal ([`Recorder::curvature`]): `sigma_k = sqrt(2 w D
+    /// / (n H_k))`, `D` the data term at the solution over its `n` weighted
+    /// values, `w` its weight.
+    fn posterior_sigma(&self, rendered: &[[f64; 3]]) -> Vec<f64> {
+        let data = &self.inputs.data;
+        let residual = data.weighted_sq_sum(|p, c| rendered[p][c]) / data.norm();
+        let values = data.weight.iter().flatten().filter(|&&w| w > 0.0).count().max(1) as f64;
+        let scale = 2.0 * self.data_weight() * residual / values;
+        self.curvature()
+            .into_iter()
+            .map(|h| (scale / h.max(1e-300)).sqrt())
+            .collect()
     }
 
     /// The lighting terms at the map `x` on `tape`: the map's leaf and the
@@ -449,7 +458,8 @@ mod tests {
 
     #[test]
     fn the_posterior_is_tighter_where_the_photo_tells_more() {
-        let (_, transport, data, x0) = scene();
+        let (photo, transport, data, x0) = scene();
+        let pixels: Vec<u32> = (0..data.target.len() as u32).collect();
         let terms = LightingTerms::compile(Arc::new(Objective::paper_default()), LightingMethod::LeastSquares).unwrap();
         let env = solve_with(&terms);
         let level = Level {
@@ -460,7 +470,11 @@ mod tests {
         };
         let mut rendered = vec![[0.0; 3]; transport.pixels];
         transport.apply(&env, &mut rendered);
-        let sigma = terms.posterior_sigma(&level, &rendered);
+        let scene = TapeScene::new(&photo, &Pose::IDENTITY, &pixels, 5);
+        let sigma = terms
+            .account(&level, &env, &rendered, &scene)
+            .expect("an account")
+            .sigma;
         assert_eq!(sigma.len(), env.len());
         assert!(sigma.iter().all(|s| s.is_finite() && *s > 0.0), "{sigma:?}");
         // A texel's deviation falls as its data curvature rises.
