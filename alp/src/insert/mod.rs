@@ -33,7 +33,7 @@ use serde::Deserialize;
 
 use render::RenderError;
 use render::accel::Accel;
-use render::bsdf::{Bsdf, GgxMetal, Lambertian, Mirror, PointBsdf, PointSurface};
+use render::bsdf::{GgxMetal, Lambertian, Mirror, PointSurface, Reflectance};
 use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::RgbImage;
@@ -73,17 +73,9 @@ impl Finish {
         }
     }
 
-    /// The BSDF that renders it.
-    pub fn bsdf(self) -> &'static dyn Bsdf<f32> {
-        match self {
-            Finish::Diffuse => &Lambertian,
-            Finish::Metal => &GgxMetal,
-            Finish::Mirror => &Mirror,
-        }
-    }
-
-    /// The same BSDF's point form, for the light the object sends the ground.
-    pub fn point_bsdf(self) -> &'static dyn PointBsdf {
+    /// The BSDF that renders it, on the tape and at points (the light the
+    /// object sends the ground).
+    pub fn bsdf(self) -> &'static dyn Reflectance {
         match self {
             Finish::Diffuse => &Lambertian,
             Finish::Metal => &GgxMetal,
@@ -471,7 +463,7 @@ impl<'a> PosedObject<'a> {
         let wo = frame.to_local(-wi);
         let asset = &self.object.asset;
         let point = ShadingPoint {
-            bsdf: self.object.finish.point_bsdf(),
+            bsdf: self.object.finish.bsdf(),
             surface: PointSurface {
                 albedo: asset.albedo.lookup(uv),
                 roughness: asset.roughness.lookup(uv)[0],

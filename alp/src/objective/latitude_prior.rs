@@ -95,7 +95,7 @@ impl Term for LatitudePrior {
 }
 
 /// One row of the map under the latitude prior.
-pub struct Band {
+struct Band {
     /// Its first texel.
     start: usize,
     /// `lambda area q` of the row.

@@ -19,6 +19,19 @@ pub trait MapPrior: Send + Sync {
     fn texel_curvature(&self, texels: usize) -> Vec<f64>;
 }
 
+/// Per texel of the map's `texels`, the summed curvature of `priors` (in
+/// one channel, at small differences).
+pub fn summed_curvature(priors: &[Box<dyn MapPrior>], texels: usize) -> Vec<f64> {
+    let mut curvature = vec![0.0; texels];
+    for prior in priors {
+        curvature
+            .iter_mut()
+            .zip(prior.texel_curvature(texels))
+            .for_each(|(a, b)| *a += b);
+    }
+    curvature
+}
+
 /// The term `name`'s value on `ctx`'s tape: the prior `make` builds on the
 /// lighting solve's basis, over the map on the tape (`None` where the phase
 /// holds no map or no basis).

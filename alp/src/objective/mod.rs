@@ -59,9 +59,9 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 
 pub use data_least_squares::{DataTerm, LeastSquaresData};
-pub use latitude_prior::{Band, Bands, LatitudePrior};
+pub use latitude_prior::{Bands, LatitudePrior};
 pub use light_smoothness::LightSmoothness;
-pub use map_prior::{MapPrior, MapPriorOp};
+pub use map_prior::{MapPrior, MapPriorOp, summed_curvature};
 pub use mask::{Chamfer, MaskL1};
 pub use neighbour_smoothness::{
     DARK_LEVEL, LightingInputs, NeighbourSmoothness, Pair, Prior, PriorBasis, Smoothness, clipped_lights,

@@ -16,6 +16,11 @@ mod point;
 
 pub use point::{PointBsdf, PointSample, PointSurface};
 
+/// A reflectance model in both forms: on an f32 tape and at points.
+pub trait Reflectance: Bsdf<f32> + PointBsdf {}
+
+impl<B: Bsdf<f32> + PointBsdf> Reflectance for B {}
+
 /// The material at each sample (from the probe's textures).
 #[derive(Clone, Copy, Debug)]
 pub struct Surface<'t, T: Real> {

@@ -10,7 +10,7 @@ use render::transport::{PullBackScratch, Transport};
 
 use crate::error::{Error, Result};
 use crate::estimate::settings::LightingMethod;
-use crate::objective::{DataTerm, LeastSquaresForm, MapPrior, PriorBasis, Smoothness};
+use crate::objective::{DataTerm, LeastSquaresForm, MapPrior, PriorBasis, Smoothness, summed_curvature};
 
 /// The 2:1 map sizes of a coarse-to-fine solve ending at `size`: heights
 /// doubling from `coarsest` (or `size` itself when not larger).
@@ -93,14 +93,7 @@ pub fn solve_with(
     let data_norm = data.norm();
     // The data term's curvature per unknown, and the priors' per texel (at
     // small differences; alike in every channel).
-    let texels = transport.width * transport.height;
-    let mut prior_curvature = vec![0.0; texels];
-    for prior in &priors {
-        prior_curvature
-            .iter_mut()
-            .zip(prior.texel_curvature(texels))
-            .for_each(|(a, b)| *a += b);
-    }
+    let prior_curvature = summed_curvature(&priors, transport.width * transport.height);
     let curvature: Vec<f64> = (basis.data_curvature.iter().enumerate())
         .map(|(k, d)| d + prior_curvature[k / 3])
         .collect();

@@ -29,7 +29,7 @@ use crate::estimate::pose::hypotheses::front_facing;
 use crate::estimate::settings::LightingMethod;
 use crate::objective::{
     DataTerm, ImageTerms, LeastSquaresData, LeastSquaresForm, LightingInputs, NeighbourSmoothness, Objective, Phase,
-    PriorBasis, TermContext, Weighting, mask_mean_luminance,
+    PriorBasis, TermContext, Weighting, mask_mean_luminance, summed_curvature,
 };
 
 /// The progress at which the lighting phase reads its terms' weights: it
@@ -200,18 +200,13 @@ impl LightingTerms {
 /// Per texel, the curvature of the lighting terms with a prior's
 /// least-squares form on `basis` (in one channel, at small differences).
 fn prior_curvature(objective: &Objective, basis: &PriorBasis) -> Vec<f64> {
-    let texels = basis.width * basis.height;
-    let mut curvature = vec![0.0; texels];
-    for t in objective.terms_in(Phase::Lighting) {
-        let weight = t.weight().at(LIGHTING_PROGRESS);
-        if let Some(prior) = t.term().least_squares_form().and_then(|f| f.prior(basis, weight)) {
-            curvature
-                .iter_mut()
-                .zip(prior.texel_curvature(texels))
-                .for_each(|(a, b)| *a += b);
-        }
-    }
-    curvature
+    let priors: Vec<_> = (objective.terms_in(Phase::Lighting))
+        .filter_map(|t| {
+            let weight = t.weight().at(LIGHTING_PROGRESS);
+            t.term().least_squares_form().and_then(|f| f.prior(basis, weight))
+        })
+        .collect();
+    summed_curvature(&priors, basis.width * basis.height)
 }
 
 /// The exact solve's priors when every lighting term of non-zero weight
