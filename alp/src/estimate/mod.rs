@@ -47,7 +47,7 @@ pub use settings::{Quality, Settings};
 
 use probe::Probe;
 
-use lighting::{LightingTerms, MapSizes, OutputSolve, env_from_texels, final_fit, lighting_report};
+use lighting::{ClippedLight, LightingTerms, MapSizes, OutputSolve, env_from_texels, final_fit, lighting_report};
 use pose::orientation::PoseSearch;
 use pose::{PoseFound, PoseInput};
 use report::{PhaseLog, WorkingImage};
@@ -127,6 +127,14 @@ pub fn estimate_with(
     let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, output, &sizes, settings)?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
+    let clipped_lights = ClippedLight::found(
+        &fit.transport,
+        &fit.data,
+        &fit.hits.pixels,
+        fit.hits.width,
+        &fit.env,
+        &fit.rendered,
+    );
     let maps = fit.output_maps(sizes.work, out_size, &settings.lighting)?;
     // The probe's outline at the found pose (`mask_found.png`): the sharp
     // camera's pixels it covers at least half of.
@@ -166,6 +174,7 @@ pub fn estimate_with(
         mask_on_border_pixels: mask_on_border(&full.mask),
         working_image: WorkingImage::of(photo, working.factor),
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
+        clipped_lights,
         blur,
         final_spp,
         objective: report::ObjectiveReport::new(&settings.objective, terms.is_exact()),

@@ -8,6 +8,7 @@ use render::pose::Pose;
 use serde::Serialize;
 
 use super::blur::BlurEstimate;
+use super::lighting::ClippedLight;
 
 use super::photo::Photo;
 use super::settings::Settings;
@@ -88,6 +89,10 @@ pub struct Report {
     pub working_image: WorkingImage,
     /// Pixels excluded as clipped (over-exposed), of the working image.
     pub clipped_pixels: usize,
+    /// The lights seen only through clipped pixels, brightest first: each
+    /// one's direction, power and whether the photo tells that power or
+    /// only a lower bound of it.
+    pub clipped_lights: Vec<ClippedLight>,
     /// The photo's blur: given (`--blur`), or measured on the probe's edges
     /// (`estimate::blur`); every render of the probe spreads its pixels' rays
     /// by it when it reaches `BlurSettings::min_blur_px`.

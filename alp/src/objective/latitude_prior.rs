@@ -1,25 +1,25 @@
-//! The latitude prior: a scene's radiance and colour vary far more with
-//! elevation (sky, horizon, ground) than with azimuth, so a texel the photo
-//! tells little of leans towards what the seen part of its row shows.
+//! The latitude prior: a scene's colour varies far more with elevation
+//! (sky, horizon, ground) than with azimuth, so a texel the photo tells
+//! little of leans towards the colour the seen part of its row shows.
 //!
-//! Per channel, with `m_r` the row's seen level in the solve's start -- the
-//! mean of its texels weighted by how much the photo tells of each (its
-//! data curvature relative to the best-seen texel's) over their level (so
-//! that a light in the row does not lift the rest) -- the prior is
+//! Per texel `t` of row `r`, with `e_r` the unit RGB direction of the row's
+//! seen colour in the solve's start (its texels weighted by how much the
+//! photo tells of each over their level, so that a light in the row does
+//! not set it) and `u_t = 1 - c_t` (`c_t` the texel's data curvature
+//! against the best-seen texel's: the sampling confidence), the prior is
 //!
 //! ```text
-//! lambda sum_r area_r q_r sum_{t in r} (x_t - m_r)^2
+//! lambda sum_t area_t q_t u_t |x_t - (e_r . x_t) e_r|^2
 //! ```
 //!
-//! with `q_r` the row's relative factor (differences count against its
-//! level, as the smoothness's do) and `lambda` the smoothness's scale. Its
-//! curvature is alike for every texel, so it moves a texel in proportion to
-//! how little the data tell of it (their curvature against its). `m_r` is a
-//! constant of the solve (the start is the coarser level's solution): were
-//! it the current map's, the few texels that set it would answer for the
-//! whole row. The lights brighter than the sensor are left out. Not in the
-//! default objective: on the train split it costs every sphere, the lights'
-//! energy most (docs/results/benchmark.md 19.2).
+//! the part of the texel's colour across the row's, with `q_t` its relative
+//! factor (so the cost is about the squared angle between the two colours)
+//! and `lambda` the smoothness's scale. It leaves each texel's level along
+//! `e_r` to the data and the smoothness: a prior on levels pulls what the
+//! blurred data set in aggregate, and the lights lose their energy
+//! (docs/results/benchmark.md 19.2). `e_r` is a constant of the solve (the
+//! start is the coarser level's solution), so the prior is quadratic. The
+//! lights brighter than the sensor are left out.
 
 use autodiff::Var;
 
@@ -42,30 +42,37 @@ impl LatitudePrior {
         let mut rows = Vec::with_capacity(h);
         for r in 0..h {
             let texels = r * w..(r + 1) * w;
-            let confidence = |t: usize| told[t] / most;
             let seen_weight = |t: usize| match basis.free[t] {
                 true => 0.0,
-                false => confidence(t) / (basis.level[t] + floor),
+                false => told[t] / most / (basis.level[t] + floor),
             };
-            let total: f64 = texels.clone().map(seen_weight).sum();
-            if total <= 0.0 {
+            let colour: [f64; 3] = std::array::from_fn(|c| {
+                texels
+                    .clone()
+                    .map(|t| seen_weight(t) * basis.start[3 * t + c].max(0.0))
+                    .sum()
+            });
+            let norm = colour.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if norm <= 0.0 {
                 continue;
             }
-            let beta: Vec<f64> = texels.clone().map(|t| seen_weight(t) / total).collect();
-            let level: f64 = texels.clone().zip(&beta).map(|(t, b)| b * basis.level[t]).sum();
-            let target: [f64; 3] =
-                std::array::from_fn(|c| texels.clone().zip(&beta).map(|(t, b)| b * basis.start[3 * t + c]).sum());
-            let relative = match basis.relative {
-                true => ((basis.mean_level + floor) / (level + floor)).powi(2),
-                false => 1.0,
-            };
             let area = (std::f64::consts::PI * (r as f64 + 0.5) / h as f64).sin();
-            let held = texels.map(|t| if basis.free[t] { 0.0 } else { 1.0 }).collect();
+            let scale = texels
+                .map(|t| {
+                    let relative = match basis.relative {
+                        true => ((basis.mean_level + floor) / (basis.level[t] + floor)).powi(2),
+                        false => 1.0,
+                    };
+                    match basis.free[t] {
+                        true => 0.0,
+                        false => lambda * area * relative * (1.0 - told[t] / most),
+                    }
+                })
+                .collect();
             rows.push(Band {
                 start: r * w,
-                scale: lambda * area * relative,
-                target,
-                held,
+                colour: colour.map(|v| v / norm),
+                scale,
             });
         }
         Bands { rows }
@@ -98,12 +105,18 @@ impl Term for LatitudePrior {
 struct Band {
     /// Its first texel.
     start: usize,
-    /// `lambda area q` of the row.
-    scale: f64,
-    /// The row's seen level in the start, per channel.
-    target: [f64; 3],
-    /// 1 for a texel the prior holds, 0 for a free light.
-    held: Vec<f64>,
+    /// The unit RGB direction of the row's seen colour.
+    colour: [f64; 3],
+    /// Per texel, `lambda area q u` (0 for a free light).
+    scale: Vec<f64>,
+}
+
+impl Band {
+    /// The part of texel `x`'s colour across the row's.
+    fn across(&self, x: &[f64]) -> [f64; 3] {
+        let along: f64 = (0..3).map(|c| x[c] * self.colour[c]).sum();
+        std::array::from_fn(|c| x[c] - along * self.colour[c])
+    }
 }
 
 /// The latitude prior over a map's rows (rows the photo tells nothing of
@@ -116,12 +129,13 @@ impl MapPrior for Bands {
     fn add_value_and_gradient(&self, x: &[f64], g: &mut [f64]) -> f64 {
         let mut f = 0.0;
         for band in &self.rows {
-            for (k, held) in band.held.iter().enumerate() {
+            for (k, scale) in band.scale.iter().enumerate() {
                 let t = band.start + k;
+                // |Q x|^2 with Q the symmetric projector across the colour: gradient 2 Q x.
+                let v = band.across(&x[3 * t..3 * t + 3]);
                 for c in 0..3 {
-                    let d = x[3 * t + c] - band.target[c];
-                    f += band.scale * held * d * d;
-                    g[3 * t + c] += 2.0 * band.scale * held * d;
+                    f += scale * v[c] * v[c];
+                    g[3 * t + c] += 2.0 * scale * v[c];
                 }
             }
         }
@@ -129,10 +143,11 @@ impl MapPrior for Bands {
     }
 
     fn texel_curvature(&self, texels: usize) -> Vec<f64> {
+        // Per channel 2 s (1 - e_c^2); the mean over the channels is 2 s 2/3.
         let mut curvature = vec![0.0; texels];
         for band in &self.rows {
-            for (k, u) in band.held.iter().enumerate() {
-                curvature[band.start + k] += 2.0 * band.scale * u;
+            for (k, scale) in band.scale.iter().enumerate() {
+                curvature[band.start + k] += 4.0 / 3.0 * scale;
             }
         }
         curvature
@@ -144,23 +159,21 @@ mod tests {
     use super::super::map_prior::tests::check_prior;
     use super::*;
 
-    /// A 6 x 3 map of 2 with a light of 40 in the middle row and its right
-    /// half at `right`.
-    fn map(right: f64) -> Vec<f64> {
+    /// A 6 x 3 map of warm grey (2, 1.5, 1) with a white light of 40 in the
+    /// middle row and that row's right half `right` (RGB).
+    fn map(right: [f64; 3]) -> Vec<f64> {
         (0..18)
-            .flat_map(|t| {
-                let v = match (t / 6, t % 6) {
-                    (1, 1) => 40.0,
-                    (1, c) if c >= 3 => right,
-                    _ => 2.0,
-                };
-                [v; 3]
+            .flat_map(|t| match (t / 6, t % 6) {
+                (1, 1) => [40.0; 3],
+                (1, c) if c >= 3 => right,
+                _ => [2.0, 1.5, 1.0],
             })
             .collect()
     }
 
-    /// A 6 x 3 basis from [`map`]`(2)` whose middle row is seen on its left
-    /// half only, with one free light there; the top row unseen.
+    /// A 6 x 3 basis from [`map`] (warm grey right half) whose middle row
+    /// is seen on its left half only, with one free light there; the top
+    /// row unseen.
     fn basis() -> PriorBasis {
         let (w, h) = (6, 3);
         let told = |t: usize| match (t / w, t % w) {
@@ -169,7 +182,7 @@ mod tests {
             _ => 0.0,
         };
         PriorBasis {
-            start: map(2.0),
+            start: map([2.0, 1.5, 1.0]),
             width: w,
             height: h,
             level: (0..w * h).map(|t| 0.5 + 0.1 * (t % 4) as f64).collect(),
@@ -188,19 +201,23 @@ mod tests {
     }
 
     #[test]
-    fn an_unseen_texel_takes_its_row_s_seen_level_and_a_seen_one_keeps_its_own() {
+    fn an_unseen_texel_takes_its_row_s_seen_colour_at_its_own_level() {
         let basis = basis();
         let bands = LatitudePrior.bands(&basis, 1.0);
-        // The top row holds no seen texel: no band. The middle row's seen level is its seen
-        // texels' in the start (the free light left out): a map that is 2 there and 5 on the
-        // unseen right half costs, and moving the right half to 2 removes the cost.
+        // The top row holds no seen texel: no band. An unseen right half of the middle row
+        // in blue costs; in the seen colour at any level (here 3x) it costs nothing.
         assert_eq!(bands.rows.len(), 2);
         let value = |x: &[f64]| bands.add_value_and_gradient(x, &mut vec![0.0; x.len()]);
-        assert!(value(&map(5.0)) > 0.0);
-        assert!(value(&map(2.0)).abs() < 1e-12, "{}", value(&map(2.0)));
-        // The free light is not held.
+        assert!(value(&map([1.0, 1.0, 3.0])) > 0.0);
+        assert!(
+            value(&map([6.0, 4.5, 3.0])).abs() < 1e-12,
+            "{}",
+            value(&map([6.0, 4.5, 3.0]))
+        );
+        // The best-seen texels and the free light are not held; the unseen ones are.
         let curvature = bands.texel_curvature(18);
-        assert!(curvature[6 + 4] > 0.0 && curvature[6] > 0.0, "{curvature:?}");
+        assert!(curvature[6 + 4] > 0.0 && curvature[12] > 0.0, "{curvature:?}");
+        assert_eq!(curvature[6], 0.0);
         assert_eq!(curvature[6 + 1], 0.0);
     }
 }

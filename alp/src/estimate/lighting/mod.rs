@@ -7,6 +7,7 @@
 //! output map's fit leaves out pixels on the probe's reflectance edges and
 //! weighs each by the share of its light the model follows.
 
+pub mod clipped;
 pub mod least_squares;
 pub mod phase;
 
@@ -23,6 +24,7 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 use render::sampling::EnvSampler;
 
+pub use clipped::{ClippedLight, PowerTold};
 pub use least_squares::{LightingSolve, Solved, pyramid, solve};
 pub use phase::LightingTerms;
 pub use render::transport::{MAX_TEXELS, SampleRecord, Transport};

@@ -1,0 +1,231 @@
+//! Lights brighter than the sensor, as the solved map holds them.
+//!
+//! A pixel clipped by the sensor bounds what it sees from below only (the
+//! data term's `at_least`), and the texels the clipped pixels read most,
+//! seen mostly through them, are free of the prior
+//! ([`clipped_lights`](crate::objective::clipped_lights)). Each patch of
+//! clipped pixels in the photo sees a light: the texels its pixels read
+//! most. Where the patch's bounds are what holds the light up (its pixels
+//! render at their clip level), the photo tells only that the light is at
+//! least as bright as the map has it; where the light's unclipped shoulders
+//! (a rough lobe's tail) raise it above the bounds, they set its power.
+//! `report.json` lists each light with which of the two it is.
+
+use std::collections::BTreeSet;
+
+use glam::{Vec2, Vec3};
+use render::colour::luminance;
+use render::envmap::uv_to_direction;
+use serde::Serialize;
+
+use super::Transport;
+use crate::objective::DataTerm;
+
+/// A patch whose clipped pixels render within this factor of their clip
+/// level (median, luminance) holds its light at its bound: the light's
+/// power is a lower bound. The solve meets a bound to its tolerance; a
+/// light its shoulders set renders its clipped pixels well above it.
+const AT_BOUND: f64 = 1.05;
+
+/// How the photo tells a clipped light's power.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PowerTold {
+    /// Only its clipped pixels' bounds hold it up: at least this power.
+    LowerBound,
+    /// Its unclipped shoulders set it above the bounds.
+    Fitted,
+}
+
+/// The light a patch of clipped pixels sees, in the solved map.
+#[derive(Clone, Debug, Serialize)]
+pub struct ClippedLight {
+    /// Its direction (unit, world): the mean over its texels weighted by
+    /// their power.
+    pub direction: [f32; 3],
+    /// Its texels' solid angle (sr) in the working map.
+    pub solid_angle_sr: f64,
+    /// Its power in the map, radiance integrated over its texels, RGB.
+    pub power: [f64; 3],
+    /// Its share of the map's power (luminance).
+    pub share_of_map: f64,
+    /// The patch's clipped pixels (of the working image).
+    pub clipped_pixels: usize,
+    /// Whether `power` is a lower bound or fitted to its shoulders.
+    pub power_told: PowerTold,
+}
+
+impl ClippedLight {
+    /// The lights of the patches of clipped pixels (eight neighbours in an
+    /// image `image_width` wide; `pixels` the transport's pixels' indices
+    /// there) in the map `env` (texel-major RGB, the transport's size)
+    /// solved from `data` over `transport`, which renders `rendered`.
+    /// Brightest first.
+    pub fn found(
+        transport: &Transport,
+        data: &DataTerm,
+        pixels: &[u32],
+        image_width: usize,
+        env: &[f64],
+        rendered: &[[f64; 3]],
+    ) -> Vec<Self> {
+        let (w, h) = (transport.width, transport.height);
+        let clipped: Vec<usize> = (0..transport.pixels)
+            .filter(|&p| data.at_least[p] && data.used(p))
+            .collect();
+        let at = |p: usize| ((pixels[p] as usize) % image_width, (pixels[p] as usize) / image_width);
+        let positions: Vec<(usize, usize)> = clipped.iter().map(|&p| at(p)).collect();
+        let solid_angle = |row: usize| {
+            let theta = |r: usize| std::f64::consts::PI * r as f64 / h as f64;
+            2.0 * std::f64::consts::PI / w as f64 * (theta(row).cos() - theta(row + 1).cos())
+        };
+        let texel = |t: usize| [env[3 * t], env[3 * t + 1], env[3 * t + 2]];
+        let map_power: f64 = (0..w * h).map(|t| luminance(texel(t)) * solid_angle(t / w)).sum();
+        let mut lights: Vec<ClippedLight> = patches(&positions)
+            .into_iter()
+            .map(|patch| {
+                let patch: Vec<usize> = patch.into_iter().map(|k| clipped[k]).collect();
+                let texels: BTreeSet<usize> = patch.iter().filter_map(|&p| transport.strongest_texel(p)).collect();
+                let (mut power, mut solid_angle_sr, mut direction) = ([0.0; 3], 0.0, Vec3::ZERO);
+                for &t in &texels {
+                    let omega = solid_angle(t / w);
+                    let radiance = texel(t);
+                    (0..3).for_each(|c| power[c] += radiance[c] * omega);
+                    solid_angle_sr += omega;
+                    let uv = Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32);
+                    direction += uv_to_direction(uv) * (luminance(radiance) * omega).max(1e-30) as f32;
+                }
+                let mut ratios: Vec<f64> = patch
+                    .iter()
+                    .map(|&p| luminance(rendered[p]) / luminance(data.target[p]).max(1e-30))
+                    .collect();
+                ratios.sort_by(f64::total_cmp);
+                ClippedLight {
+                    direction: direction.normalize_or(Vec3::Y).to_array(),
+                    solid_angle_sr,
+                    power,
+                    share_of_map: luminance(power) / map_power.max(1e-30),
+                    clipped_pixels: patch.len(),
+                    power_told: match ratios[ratios.len() / 2] <= AT_BOUND {
+                        true => PowerTold::LowerBound,
+                        false => PowerTold::Fitted,
+                    },
+                }
+            })
+            .collect();
+        lights.sort_by(|a, b| luminance(b.power).total_cmp(&luminance(a.power)));
+        lights
+    }
+}
+
+/// The patches of `positions` (image column, row): groups of eight
+/// neighbours, each as indices into `positions`, none empty.
+fn patches(positions: &[(usize, usize)]) -> Vec<Vec<usize>> {
+    let index: std::collections::HashMap<(usize, usize), usize> =
+        positions.iter().enumerate().map(|(k, &xy)| (xy, k)).collect();
+    let mut patch_of = vec![None; positions.len()];
+    let mut patches = Vec::new();
+    for seed in 0..positions.len() {
+        if patch_of[seed].is_some() {
+            continue;
+        }
+        patch_of[seed] = Some(patches.len());
+        let (mut members, mut stack) = (vec![seed], vec![seed]);
+        while let Some(k) = stack.pop() {
+            let (x, y) = positions[k];
+            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let (Some(nx), Some(ny)) = (x.checked_add_signed(dx), y.checked_add_signed(dy)) else {
+                    continue;
+                };
+                if let Some(&n) = index.get(&(nx, ny))
+                    && patch_of[n].is_none()
+                {
+                    patch_of[n] = Some(patches.len());
+                    members.push(n);
+                    stack.push(n);
+                }
+            }
+        }
+        patches.push(members);
+    }
+    patches
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec2;
+
+    /// An 8 x 4 map of 1s with a light of `light` in texel 9 that each
+    /// pixel reads one texel of, texel 9's pixel clipped at 2, and (with
+    /// `shoulder`) one more pixel that reads texel 9 at 5 % beside texel 10.
+    fn scene(light: f64, shoulder: bool) -> (Transport, DataTerm, Vec<f64>) {
+        let (w, h) = (8, 4);
+        let centre = |t: usize| Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32);
+        let mut uv: Vec<Vec2> = (0..w * h).map(centre).collect();
+        let mut segment: Vec<u32> = (0..uv.len() as u32).collect();
+        let mut throughput = vec![[1.0f32; 3]; uv.len()];
+        let mut pixels = w * h;
+        if shoulder {
+            uv.extend([centre(9), centre(10)]);
+            segment.extend([pixels as u32; 2]);
+            throughput.extend([[0.05; 3], [0.95; 3]]);
+            pixels += 1;
+        }
+        let transport = Transport::new(&segment, &uv, &throughput, pixels, w, h);
+        let env: Vec<f64> = (0..w * h * 3).map(|i| if i / 3 == 9 { light } else { 1.0 }).collect();
+        let mut target = vec![[0.0; 3]; pixels];
+        transport.apply(&env, &mut target);
+        target[9] = [2.0; 3];
+        let mut data = DataTerm::exact(target, vec![[1.0; 3]; pixels]);
+        data.at_least[9] = true;
+        (transport, data, env)
+    }
+
+    fn lights(light: f64, shoulder: bool) -> Vec<ClippedLight> {
+        let (transport, data, env) = scene(light, shoulder);
+        let mut rendered = vec![[0.0; 3]; transport.pixels];
+        transport.apply(&env, &mut rendered);
+        // The pixels in a row of an image 100 wide: the clipped one alone.
+        let pixels: Vec<u32> = (0..transport.pixels as u32).map(|p| 3 * p).collect();
+        ClippedLight::found(&transport, &data, &pixels, 100, &env, &rendered)
+    }
+
+    #[test]
+    fn a_light_held_at_its_bound_is_a_lower_bound_and_one_its_shoulders_lift_is_fitted() {
+        // At its bound (2): a lower bound. At 100 with a shoulder pixel: fitted.
+        let bound = lights(2.0, false);
+        assert_eq!(bound.len(), 1);
+        assert_eq!(bound[0].power_told, PowerTold::LowerBound);
+        assert_eq!(bound[0].clipped_pixels, 1);
+        let fitted = lights(100.0, true);
+        assert_eq!(fitted.len(), 1);
+        assert_eq!(fitted[0].power_told, PowerTold::Fitted);
+        // Its power and direction are texel 9's: row 1, column 1 of 8 x 4.
+        let omega = 2.0 * std::f64::consts::PI / 8.0
+            * ((std::f64::consts::PI / 4.0).cos() - (std::f64::consts::PI / 2.0).cos());
+        assert!((fitted[0].solid_angle_sr - omega).abs() < 1e-9);
+        assert!(
+            (fitted[0].power[0] - 100.0 * omega).abs() < 1e-6,
+            "{:?}",
+            fitted[0].power
+        );
+        let expected = uv_to_direction(Vec2::new(1.5 / 8.0, 1.5 / 4.0));
+        assert!(Vec3::from(fitted[0].direction).angle_between(expected) < 1e-4);
+        let total = 4.0 * std::f64::consts::PI + 99.0 * omega;
+        assert!(
+            (fitted[0].share_of_map - 100.0 * omega / total).abs() < 1e-3,
+            "{}",
+            fitted[0].share_of_map
+        );
+    }
+
+    #[test]
+    fn clipped_pixels_group_by_their_eight_neighbours() {
+        // (0, 0) and (1, 1) touch at a corner; (5, 5) stands alone.
+        let mut groups = patches(&[(0, 0), (5, 5), (1, 1)]);
+        groups.iter_mut().for_each(|g| g.sort());
+        groups.sort();
+        assert_eq!(groups, vec![vec![0, 2], vec![1]]);
+    }
+}
