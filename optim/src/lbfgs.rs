@@ -344,8 +344,33 @@ impl Memory {
     }
 }
 
+/// Lanes of [`dot`]'s independent partial sums.
+const DOT_LANES: usize = 8;
+
+/// `a . b` in [`DOT_LANES`] partial sums added pairwise: one running sum
+/// chains every add on the one before (a lighting solve's 10^5 unknowns,
+/// 20 dot products an iteration); independent lanes vectorise. The order
+/// is fixed, so the result does not depend on the machine.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let mut lanes = [0.0; DOT_LANES];
+    let (a_chunks, a_rest) = a.as_chunks::<DOT_LANES>();
+    let (b_chunks, b_rest) = b.as_chunks::<DOT_LANES>();
+    for (x, y) in a_chunks.iter().zip(b_chunks) {
+        for k in 0..DOT_LANES {
+            lanes[k] += x[k] * y[k];
+        }
+    }
+    for (k, (x, y)) in a_rest.iter().zip(b_rest).enumerate() {
+        lanes[k] += x * y;
+    }
+    let mut width = DOT_LANES;
+    while width > 1 {
+        width /= 2;
+        for k in 0..width {
+            lanes[k] += lanes[k + width];
+        }
+    }
+    lanes[0]
 }
 
 /// `y += a x`.
@@ -360,6 +385,17 @@ fn norm(v: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dot_sums_every_product_whatever_the_length() {
+        // Lengths below, at and past the lanes, with a remainder: against the plain sum.
+        for n in [0, 1, 7, 8, 9, 31, 100] {
+            let a: Vec<f64> = (0..n).map(|i| 1.0 + i as f64 * 0.5).collect();
+            let b: Vec<f64> = (0..n).map(|i| 2.0 - i as f64 * 0.25).collect();
+            let plain: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+            assert!((dot(&a, &b) - plain).abs() <= 1e-12 * plain.abs().max(1.0), "n = {n}");
+        }
+    }
 
     #[test]
     fn two_loop_inverts_a_quadratic_after_n_exact_pairs() {
