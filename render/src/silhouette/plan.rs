@@ -1,5 +1,7 @@
 //! The non-differentiated half of the soft silhouette: every discrete choice, made once per pose.
 
+use std::ops::Range;
+
 use glam::{Vec2, Vec3};
 
 use super::grid::BoxGrid;
@@ -118,15 +120,13 @@ impl SilhouettePlan {
         }
         let corners = |tri: &[u32; 3]| tri.map(|i| projected[i as usize]);
 
-        let covered = rasterize(&front, &projected, width, height);
-        let covered_count = covered.iter().filter(|&&c| c).count();
-        if covered_count == 0 {
+        let (covered, Some(covered_box)) = rasterize(&front, &projected, width, height) else {
             return Err(RenderError::value(
                 "pose",
                 format!("the probe covers no pixel centre of the {width}x{height} image"),
             ));
-        }
-        let band = band_pixels(&covered, width, height, settings.band_px);
+        };
+        let band = band_pixels(&covered, &covered_box, width, height, settings.band_px);
         if band.is_empty() {
             return Err(RenderError::value(
                 "pose",
@@ -246,8 +246,10 @@ impl SilhouettePlan {
         let mut fixed_area = 0.0;
         let mut fixed_moment = [0.0; 2];
         let mut band_iter = band.iter().peekable();
-        for (i, &c) in covered.iter().enumerate() {
-            if band_iter.next_if(|&&b| b as usize == i).is_some() || !c {
+        for i in covered_box.pixels(width) {
+            // The band's pixels before `i` (outside the box's columns) are passed over.
+            while band_iter.next_if(|&&b| (b as usize) < i).is_some() {}
+            if band_iter.next_if(|&&b| b as usize == i).is_some() || !covered[i] {
                 continue;
             }
             let p = pixel_centre(i, width);
@@ -384,9 +386,41 @@ fn inside_triangle(p: Vec2, v: [Vec2; 3]) -> bool {
     (0..3).all(|e| (v[(e + 1) % 3] - v[e]).perp_dot(p - v[e]) >= 0.0)
 }
 
-/// Hard coverage: pixel centres inside any of the `front` triangles.
-fn rasterize(front: &[(u32, [u32; 3])], projected: &[Vec2], width: usize, height: usize) -> Vec<bool> {
+/// The rows and columns of an image a set of pixels lies within.
+#[derive(Clone, Debug)]
+struct PixelBox {
+    rows: Range<usize>,
+    cols: Range<usize>,
+}
+
+impl PixelBox {
+    /// The box grown by `by` pixels each way, clamped to a `width x height` image.
+    fn grown(&self, by: usize, width: usize, height: usize) -> PixelBox {
+        PixelBox {
+            rows: self.rows.start.saturating_sub(by)..(self.rows.end + by).min(height),
+            cols: self.cols.start.saturating_sub(by)..(self.cols.end + by).min(width),
+        }
+    }
+
+    /// Its pixels' row-major indices in an image `width` wide, ascending.
+    fn pixels(&self, width: usize) -> impl Iterator<Item = usize> + '_ {
+        self.rows
+            .clone()
+            .flat_map(move |row| self.cols.clone().map(move |col| row * width + col))
+    }
+}
+
+/// Hard coverage: pixel centres inside any of the `front` triangles, and the box of those
+/// covered (None: none is). The later passes over the image keep to the box: the probe is
+/// often a small part of the photo.
+fn rasterize(
+    front: &[(u32, [u32; 3])],
+    projected: &[Vec2],
+    width: usize,
+    height: usize,
+) -> (Vec<bool>, Option<PixelBox>) {
     let mut covered = vec![false; width * height];
+    let mut bounds: Option<PixelBox> = None;
     for (_, tri) in front {
         let v = tri.map(|i| projected[i as usize]);
         let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
@@ -398,21 +432,33 @@ fn rasterize(front: &[(u32, [u32; 3])], projected: &[Vec2], width: usize, height
                 let i = row * width + col;
                 if !covered[i] && inside_triangle(pixel_centre(i, width), v) {
                     covered[i] = true;
+                    bounds = Some(match bounds {
+                        None => PixelBox {
+                            rows: row..row + 1,
+                            cols: col..col + 1,
+                        },
+                        Some(b) => PixelBox {
+                            rows: b.rows.start.min(row)..b.rows.end.max(row + 1),
+                            cols: b.cols.start.min(col)..b.cols.end.max(col + 1),
+                        },
+                    });
                 }
             }
         }
     }
-    covered
+    (covered, bounds)
 }
 
 /// Pixels within `band_px` (centre to centre) of a boundary pixel: one whose coverage differs
 /// from a 4-neighbour's. Ascending row-major indices.
-fn band_pixels(covered: &[bool], width: usize, height: usize, band_px: f32) -> Vec<u32> {
+/// A boundary pixel lies within one pixel of `covered_box`, the box of the covered ones.
+fn band_pixels(covered: &[bool], covered_box: &PixelBox, width: usize, height: usize, band_px: f32) -> Vec<u32> {
     let mut in_band = vec![false; width * height];
     let r = band_px.floor() as isize;
     let r2 = band_px * band_px;
-    for row in 0..height {
-        for col in 0..width {
+    let boundary_box = covered_box.grown(1, width, height);
+    for row in boundary_box.rows.clone() {
+        for col in boundary_box.cols.clone() {
             let i = row * width + col;
             let differs = |dr: isize, dc: isize| {
                 let (nr, nc) = (row as isize + dr, col as isize + dc);
@@ -440,7 +486,12 @@ fn band_pixels(covered: &[bool], width: usize, height: usize, band_px: f32) -> V
             }
         }
     }
-    (0..width * height).filter(|&i| in_band[i]).map(|i| i as u32).collect()
+    let band_box = covered_box.grown(1 + r.max(0) as usize, width, height);
+    band_box
+        .pixels(width)
+        .filter(|&i| in_band[i])
+        .map(|i| i as u32)
+        .collect()
 }
 
 /// Edges between a front- and a back-facing triangle, and open borders of front ones; edge-on
