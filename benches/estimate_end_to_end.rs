@@ -3,9 +3,11 @@
 //! and a tilted thermos cap under the sunset map (`alp::synth`, seed 7,
 //! 640x480, 1 % noise). Default and fast quality, 1 and 2 threads; the
 //! median of the timed runs after a warm-up, each phase's share of the
-//! time (its runs summed), and the errors that say the timed runs computed
-//! what they should (the pose's axis and rotation off the truth, the
-//! mirror sphere's relighting error). One JSON object per line.
+//! time (its runs' wall times summed: phases that run side by side, as the
+//! starts' fits and rankings do, can sum past the whole), and the errors
+//! that say the timed runs computed what they should (the pose's axis and
+//! rotation off the truth, the mirror sphere's relighting error). One JSON
+//! object per line.
 //!
 //! `cargo bench --bench estimate_end_to_end [-- quick]` (quick: one timed
 //! run, 2 threads)
