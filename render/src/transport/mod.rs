@@ -397,7 +397,7 @@ impl Transport {
         let texels = self.width * self.height;
         scratch.env.clear();
         scratch.env.extend(padded(env));
-        self.clear_chunk_sums(&mut scratch.sums);
+        self.size_chunk_sums(&mut scratch.sums);
         let env = &scratch.env;
         scratch
             .sums
@@ -405,6 +405,7 @@ impl Transport {
             .zip(rendered.par_chunks_mut(PIXEL_CHUNK))
             .enumerate()
             .for_each(|(chunk, (sums, rendered))| {
+                sums.fill([0.0; 4]);
                 for (p, px) in pixel_chunk(chunk, self.pixels).zip(rendered) {
                     *px = self.render_pixel(p, env);
                     self.pull_back_pixel(p, residual(p, *px), sums);
@@ -430,12 +431,13 @@ impl Transport {
             "Transport::pull_back: one gradient a texel channel"
         );
         let texels = self.width * self.height;
-        self.clear_chunk_sums(&mut scratch.sums);
+        self.size_chunk_sums(&mut scratch.sums);
         scratch
             .sums
             .par_chunks_mut(texels)
             .enumerate()
             .for_each(|(chunk, sums)| {
+                sums.fill([0.0; 4]);
                 for p in pixel_chunk(chunk, self.pixels) {
                     self.pull_back_pixel(p, r[p], sums);
                 }
@@ -443,9 +445,10 @@ impl Transport {
         add_chunk_sums(&scratch.sums, texels, grad);
     }
 
-    /// Zeroed sums per chunk of pixels and texel, four lanes each.
-    fn clear_chunk_sums(&self, sums: &mut Vec<[f64; 4]>) {
-        sums.clear();
+    /// Sums per chunk of pixels and texel, four lanes each, at their size
+    /// (each chunk zeroes its own, in parallel: ten chunks of a 256x128
+    /// map are 10 MB, which one thread would clear at every product).
+    fn size_chunk_sums(&self, sums: &mut Vec<[f64; 4]>) {
         sums.resize(self.pixels.div_ceil(PIXEL_CHUNK) * self.width * self.height, [0.0; 4]);
     }
 
@@ -520,12 +523,22 @@ pub(crate) fn padded(env: &[f64]) -> impl Iterator<Item = [f64; 4]> + '_ {
 /// Adds the chunks' partial sums (`texels` each, in chunk order) to the
 /// texel-major RGB `total` (the first three lanes of each).
 pub(crate) fn add_chunk_sums<const LANES: usize>(partial: &[[f64; LANES]], texels: usize, total: &mut [f64]) {
-    for sums in partial.chunks_exact(texels) {
-        for (t, s) in total.as_chunks_mut::<3>().0.iter_mut().zip(sums) {
-            (0..3).for_each(|c| t[c] += s[c]);
-        }
-    }
+    // Blocks of texels in parallel; each texel adds the chunks in order, as one thread would.
+    total
+        .par_chunks_mut(3 * TEXEL_BLOCK)
+        .enumerate()
+        .for_each(|(block, total)| {
+            for sums in partial.chunks_exact(texels) {
+                let sums = &sums[block * TEXEL_BLOCK..];
+                for (t, s) in total.as_chunks_mut::<3>().0.iter_mut().zip(sums) {
+                    (0..3).for_each(|c| t[c] += s[c]);
+                }
+            }
+        });
 }
+
+/// Texels per block of [`add_chunk_sums`].
+const TEXEL_BLOCK: usize = 4096;
 
 /// `start[k]..start[k + 1]` is where the items of key k go when `keys`
 /// (one per item, each below `count`) are sorted: a counting sort's offsets.
