@@ -132,7 +132,7 @@ pub fn estimate_with(
         &fit.data,
         &fit.hits.pixels,
         fit.hits.width,
-        &fit.env,
+        &env_from_texels(&fit.env, sizes.work.0, sizes.work.1)?,
         &fit.rendered,
     );
     let maps = fit.output_maps(sizes.work, out_size, &settings.lighting)?;

@@ -13,9 +13,9 @@
 
 use std::collections::BTreeSet;
 
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use render::colour::luminance;
-use render::envmap::uv_to_direction;
+use render::envmap::EnvMap;
 use serde::Serialize;
 
 use super::Transport;
@@ -58,29 +58,26 @@ pub struct ClippedLight {
 impl ClippedLight {
     /// The lights of the patches of clipped pixels (eight neighbours in an
     /// image `image_width` wide; `pixels` the transport's pixels' indices
-    /// there) in the map `env` (texel-major RGB, the transport's size)
-    /// solved from `data` over `transport`, which renders `rendered`.
-    /// Brightest first.
+    /// there) in the map `env` (the transport's size) solved from `data`
+    /// over `transport`, which renders `rendered`. Brightest first.
     pub fn found(
         transport: &Transport,
         data: &DataTerm,
         pixels: &[u32],
         image_width: usize,
-        env: &[f64],
+        env: &EnvMap,
         rendered: &[[f64; 3]],
     ) -> Vec<Self> {
         let (w, h) = (transport.width, transport.height);
+        debug_assert_eq!((env.width(), env.height()), (w, h));
         let clipped: Vec<usize> = (0..transport.pixels)
             .filter(|&p| data.at_least[p] && data.used(p))
             .collect();
         let at = |p: usize| ((pixels[p] as usize) % image_width, (pixels[p] as usize) / image_width);
         let positions: Vec<(usize, usize)> = clipped.iter().map(|&p| at(p)).collect();
-        let solid_angle = |row: usize| {
-            let theta = |r: usize| std::f64::consts::PI * r as f64 / h as f64;
-            2.0 * std::f64::consts::PI / w as f64 * (theta(row).cos() - theta(row + 1).cos())
-        };
-        let texel = |t: usize| [env[3 * t], env[3 * t + 1], env[3 * t + 2]];
-        let map_power: f64 = (0..w * h).map(|t| luminance(texel(t)) * solid_angle(t / w)).sum();
+        let solid_angle = |t: usize| env.texel_solid_angle(t / w) as f64;
+        let texel = |t: usize| env.radiance()[t].map(f64::from);
+        let map_power: f64 = (0..w * h).map(|t| luminance(texel(t)) * solid_angle(t)).sum();
         let mut lights: Vec<ClippedLight> = patches(&positions)
             .into_iter()
             .map(|patch| {
@@ -88,12 +85,11 @@ impl ClippedLight {
                 let texels: BTreeSet<usize> = patch.iter().filter_map(|&p| transport.strongest_texel(p)).collect();
                 let (mut power, mut solid_angle_sr, mut direction) = ([0.0; 3], 0.0, Vec3::ZERO);
                 for &t in &texels {
-                    let omega = solid_angle(t / w);
+                    let omega = solid_angle(t);
                     let radiance = texel(t);
                     (0..3).for_each(|c| power[c] += radiance[c] * omega);
                     solid_angle_sr += omega;
-                    let uv = Vec2::new(((t % w) as f32 + 0.5) / w as f32, ((t / w) as f32 + 0.5) / h as f32);
-                    direction += uv_to_direction(uv) * (luminance(radiance) * omega).max(1e-30) as f32;
+                    direction += env.texel_direction(t / w, t % w) * (luminance(radiance) * omega).max(1e-30) as f32;
                 }
                 let mut ratios: Vec<f64> = patch
                     .iter()
@@ -155,6 +151,7 @@ fn patches(positions: &[(usize, usize)]) -> Vec<Vec<usize>> {
 mod tests {
     use super::*;
     use glam::Vec2;
+    use render::envmap::uv_to_direction;
 
     /// An 8 x 4 map of 1s with a light of `light` in texel 9 that each
     /// pixel reads one texel of, texel 9's pixel clipped at 2, and (with
@@ -188,7 +185,15 @@ mod tests {
         transport.apply(&env, &mut rendered);
         // The pixels in a row of an image 100 wide: the clipped one alone.
         let pixels: Vec<u32> = (0..transport.pixels as u32).map(|p| 3 * p).collect();
-        ClippedLight::found(&transport, &data, &pixels, 100, &env, &rendered)
+        let map = EnvMap::new(
+            8,
+            4,
+            env.chunks_exact(3)
+                .map(|t| [t[0] as f32, t[1] as f32, t[2] as f32])
+                .collect(),
+        )
+        .expect("a map");
+        ClippedLight::found(&transport, &data, &pixels, 100, &map, &rendered)
     }
 
     #[test]
@@ -204,9 +209,10 @@ mod tests {
         // Its power and direction are texel 9's: row 1, column 1 of 8 x 4.
         let omega = 2.0 * std::f64::consts::PI / 8.0
             * ((std::f64::consts::PI / 4.0).cos() - (std::f64::consts::PI / 2.0).cos());
-        assert!((fitted[0].solid_angle_sr - omega).abs() < 1e-9);
+        // (The map is f32: its solid angles and power to f32's precision.)
+        assert!((fitted[0].solid_angle_sr - omega).abs() < 1e-6 * omega);
         assert!(
-            (fitted[0].power[0] - 100.0 * omega).abs() < 1e-6,
+            (fitted[0].power[0] - 100.0 * omega).abs() < 1e-5 * 100.0 * omega,
             "{:?}",
             fitted[0].power
         );
