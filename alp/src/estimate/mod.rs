@@ -131,7 +131,7 @@ pub fn estimate_with(
         &fit.transport,
         &fit.data,
         &fit.hits.pixels,
-        fit.hits.width,
+        (fit.hits.width, fit.hits.height),
         &env_from_texels(&fit.env, sizes.work.0, sizes.work.1)?,
         &fit.rendered,
     );

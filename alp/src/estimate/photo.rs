@@ -297,6 +297,40 @@ impl Pixels {
     }
 }
 
+/// The connected pieces of the pixels `inside` of a `width x height` image
+/// (row-major), over the 4-neighbours or, with `diagonals`, the 8: each
+/// pixel's piece, numbered in the order of their first pixels (None
+/// outside).
+pub(super) fn pieces(inside: &[bool], width: usize, height: usize, diagonals: bool) -> Vec<Option<usize>> {
+    let mut piece = vec![None; inside.len()];
+    let mut count = 0;
+    for start in 0..inside.len() {
+        if !inside[start] || piece[start].is_some() {
+            continue;
+        }
+        piece[start] = Some(count);
+        let mut stack = vec![start];
+        while let Some(i) = stack.pop() {
+            let diagonal = diagonals.then(|| Pixels::Checkerboard.neighbours(i, width, height));
+            for j in Pixels::All
+                .neighbours(i, width, height)
+                .into_iter()
+                .chain(diagonal.into_iter().flatten())
+            {
+                if let Some(j) = j
+                    && inside[j]
+                    && piece[j].is_none()
+                {
+                    piece[j] = Some(count);
+                    stack.push(j);
+                }
+            }
+        }
+        count += 1;
+    }
+    piece
+}
+
 /// The photo as the estimate works on it: box-filtered when its mask holds
 /// more pixels than the budget (`Settings::working_mask_pixels`), with the
 /// clipped pixels of what it works on.
@@ -332,6 +366,26 @@ impl WorkingPhoto {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pieces_join_by_four_neighbours_or_by_eight() {
+        // A 4 x 3 image: (0, 0) and (1, 1) touch at a corner only; (3, 2) stands alone.
+        let mut inside = vec![false; 12];
+        [0, 5, 11].iter().for_each(|&i| inside[i] = true);
+        assert_eq!(
+            pieces(&inside, 4, 3, false)
+                .iter()
+                .flatten()
+                .copied()
+                .collect::<Vec<_>>(),
+            vec![0, 1, 2]
+        );
+        let eight = pieces(&inside, 4, 3, true);
+        assert_eq!(
+            (eight[0], eight[5], eight[11], eight[1]),
+            (Some(0), Some(0), Some(1), None)
+        );
+    }
     use glam::Vec2;
     use glam::Vec3;
 

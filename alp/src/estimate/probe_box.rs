@@ -18,7 +18,7 @@ use std::collections::BinaryHeap;
 
 use render::image_io::{Mask, RgbImage};
 
-use super::photo::Pixels;
+use super::photo::{Pixels, pieces};
 use super::settings::BoxSettings;
 use crate::error::{Error, Result};
 
@@ -203,28 +203,18 @@ impl Region {
     /// The largest piece labelled [`PROBE`], as a mask of the photo.
     fn probe_mask(&self, image: &RgbImage, label: Vec<u8>) -> Mask {
         let (w, h) = (self.w, self.h);
-        let mut piece = vec![usize::MAX; w * h];
+        let probe: Vec<bool> = label.iter().map(|&l| l == PROBE).collect();
+        let piece = pieces(&probe, w, h, false);
         let mut sizes: Vec<usize> = Vec::new();
-        for start in 0..w * h {
-            if label[start] != PROBE || piece[start] != usize::MAX {
-                continue;
+        for &k in piece.iter().flatten() {
+            if k == sizes.len() {
+                sizes.push(0);
             }
-            let (id, mut stack, mut size) = (sizes.len(), vec![start], 0);
-            piece[start] = id;
-            while let Some(i) = stack.pop() {
-                size += 1;
-                for j in neighbours(i, w, h) {
-                    if label[j] == PROBE && piece[j] == usize::MAX {
-                        piece[j] = id;
-                        stack.push(j);
-                    }
-                }
-            }
-            sizes.push(size);
+            sizes[k] += 1;
         }
         let mut inside = vec![false; image.width * image.height];
         if let Some(largest) = (0..sizes.len()).max_by_key(|&k| sizes[k]) {
-            for i in (0..w * h).filter(|&i| piece[i] == largest) {
+            for i in (0..w * h).filter(|&i| piece[i] == Some(largest)) {
                 inside[self.photo_index(i, image.width)] = true;
             }
         }

@@ -19,6 +19,7 @@ use render::envmap::EnvMap;
 use serde::Serialize;
 
 use super::Transport;
+use crate::estimate::photo::pieces;
 use crate::objective::DataTerm;
 
 /// A patch whose clipped pixels render within this factor of their clip
@@ -56,32 +57,44 @@ pub struct ClippedLight {
 }
 
 impl ClippedLight {
-    /// The lights of the patches of clipped pixels (eight neighbours in an
-    /// image `image_width` wide; `pixels` the transport's pixels' indices
-    /// there) in the map `env` (the transport's size) solved from `data`
-    /// over `transport`, which renders `rendered`. Brightest first.
+    /// The lights of the patches of clipped pixels (eight neighbours in a
+    /// `width x height` image; `pixels` the transport's pixels' row-major
+    /// indices there) in the map `env`
+    /// (the transport's size) solved from `data` over `transport`, which
+    /// renders `rendered`. Brightest first.
     pub fn found(
         transport: &Transport,
         data: &DataTerm,
         pixels: &[u32],
-        image_width: usize,
+        (width, height): (usize, usize),
         env: &EnvMap,
         rendered: &[[f64; 3]],
     ) -> Vec<Self> {
         let (w, h) = (transport.width, transport.height);
         debug_assert_eq!((env.width(), env.height()), (w, h));
-        let clipped: Vec<usize> = (0..transport.pixels)
-            .filter(|&p| data.at_least[p] && data.used(p))
-            .collect();
-        let at = |p: usize| ((pixels[p] as usize) % image_width, (pixels[p] as usize) / image_width);
-        let positions: Vec<(usize, usize)> = clipped.iter().map(|&p| at(p)).collect();
+        // The clipped pixels in the image, each patch's in turn.
+        let mut clipped = vec![false; width * height];
+        let mut transport_pixel = vec![usize::MAX; width * height];
+        for p in (0..transport.pixels).filter(|&p| data.at_least[p] && data.used(p)) {
+            clipped[pixels[p] as usize] = true;
+            transport_pixel[pixels[p] as usize] = p;
+        }
+        let piece = pieces(&clipped, width, height, true);
+        let mut patches: Vec<Vec<usize>> = Vec::new();
+        for (i, k) in piece.iter().enumerate() {
+            if let Some(k) = *k {
+                if k == patches.len() {
+                    patches.push(Vec::new());
+                }
+                patches[k].push(transport_pixel[i]);
+            }
+        }
         let solid_angle = |t: usize| env.texel_solid_angle(t / w) as f64;
         let texel = |t: usize| env.radiance()[t].map(f64::from);
         let map_power: f64 = (0..w * h).map(|t| luminance(texel(t)) * solid_angle(t)).sum();
-        let mut lights: Vec<ClippedLight> = patches(&positions)
+        let mut lights: Vec<ClippedLight> = patches
             .into_iter()
             .map(|patch| {
-                let patch: Vec<usize> = patch.into_iter().map(|k| clipped[k]).collect();
                 let texels: BTreeSet<usize> = patch.iter().filter_map(|&p| transport.strongest_texel(p)).collect();
                 let (mut power, mut solid_angle_sr, mut direction) = ([0.0; 3], 0.0, Vec3::ZERO);
                 for &t in &texels {
@@ -112,39 +125,6 @@ impl ClippedLight {
         lights.sort_by(|a, b| luminance(b.power).total_cmp(&luminance(a.power)));
         lights
     }
-}
-
-/// The patches of `positions` (image column, row): groups of eight
-/// neighbours, each as indices into `positions`, none empty.
-fn patches(positions: &[(usize, usize)]) -> Vec<Vec<usize>> {
-    let index: std::collections::HashMap<(usize, usize), usize> =
-        positions.iter().enumerate().map(|(k, &xy)| (xy, k)).collect();
-    let mut patch_of = vec![None; positions.len()];
-    let mut patches = Vec::new();
-    for seed in 0..positions.len() {
-        if patch_of[seed].is_some() {
-            continue;
-        }
-        patch_of[seed] = Some(patches.len());
-        let (mut members, mut stack) = (vec![seed], vec![seed]);
-        while let Some(k) = stack.pop() {
-            let (x, y) = positions[k];
-            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
-                let (Some(nx), Some(ny)) = (x.checked_add_signed(dx), y.checked_add_signed(dy)) else {
-                    continue;
-                };
-                if let Some(&n) = index.get(&(nx, ny))
-                    && patch_of[n].is_none()
-                {
-                    patch_of[n] = Some(patches.len());
-                    members.push(n);
-                    stack.push(n);
-                }
-            }
-        }
-        patches.push(members);
-    }
-    patches
 }
 
 #[cfg(test)]
@@ -193,7 +173,7 @@ mod tests {
                 .collect(),
         )
         .expect("a map");
-        ClippedLight::found(&transport, &data, &pixels, 100, &map, &rendered)
+        ClippedLight::found(&transport, &data, &pixels, (100, 1), &map, &rendered)
     }
 
     #[test]
@@ -224,14 +204,5 @@ mod tests {
             "{}",
             fitted[0].share_of_map
         );
-    }
-
-    #[test]
-    fn clipped_pixels_group_by_their_eight_neighbours() {
-        // (0, 0) and (1, 1) touch at a corner; (5, 5) stands alone.
-        let mut groups = patches(&[(0, 0), (5, 5), (1, 1)]);
-        groups.iter_mut().for_each(|g| g.sort());
-        groups.sort();
-        assert_eq!(groups, vec![vec![0, 2], vec![1]]);
     }
 }
