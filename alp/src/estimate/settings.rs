@@ -397,6 +397,11 @@ pub struct PoseSearchSettings {
     pub lean_step_deg: f32,
     /// How far (degrees) the lean search may lean the pose either way.
     pub lean_reach_deg: f32,
+    /// Whether the lean search scores its leans on half the probe's pixels
+    /// (a checkerboard): half the samples, transport and solve of each,
+    /// against the score's noise. (Not a small probe's refinement: its
+    /// few pixels are all its score has.)
+    pub lean_on_checkerboard: bool,
     /// The score (dB) by which a moved pose must beat the searched one, and
     /// a rival the chosen pose: a small gain is the samples' noise.
     pub search_margin_db: f64,
@@ -564,6 +569,7 @@ impl Default for Settings {
             pose_search: PoseSearchSettings {
                 lean_step_deg: 0.3,
                 lean_reach_deg: 2.4,
+                lean_on_checkerboard: true,
                 search_margin_db: 0.3,
                 photo_refine_px: 5_000,
                 photo_refine_rounds: 3,
@@ -700,6 +706,10 @@ impl Settings {
                 final_sample_budget: 8 << 20,
                 ..d.lighting
             },
+            pose_search: PoseSearchSettings {
+                lean_on_checkerboard: false,
+                ..d.pose_search
+            },
             joint: JointSettings {
                 pose_iters: 40,
                 spp: 4,
@@ -760,6 +770,10 @@ mod tests {
         assert!(fast.lighting.spp_final < default.lighting.spp_final);
         assert!(default.lighting.spp_final < best.lighting.spp_final);
         assert_eq!(fast.pose_search.lean_step_deg, 0.0, "fast quality has no lean search");
+        assert!(
+            default.pose_search.lean_on_checkerboard && !best.pose_search.lean_on_checkerboard,
+            "best scores its leans on every pixel"
+        );
         // The yaw starts spread evenly around the axis.
         let yaws = &default.orientation.starts_deg;
         assert!(yaws.windows(2).all(|w| (w[1] - w[0] - 45.0).abs() < 1e-4), "{yaws:?}");

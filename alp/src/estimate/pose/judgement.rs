@@ -197,7 +197,11 @@ impl PhotoJudge<'_> {
                     self.settings.pose_search.lean_reach_deg,
                 );
                 let leaned = |pose: &Pose, deg: f32| hypotheses::leaned(pose, mesh, camera, deg);
-                self.search(phases, &mut kept, "lighting_lean", lean_search, Pixels::All, &leaned)?
+                let pixels = match self.settings.pose_search.lean_on_checkerboard {
+                    true => Pixels::Checkerboard,
+                    false => Pixels::All,
+                };
+                self.search(phases, &mut kept, "lighting_lean", lean_search, pixels, &leaned)?
             }
         };
         Ok(Judged {
