@@ -549,7 +549,7 @@ impl Default for Settings {
                 srgb_noise_levels: 1.5,
                 spp_pilot: 16,
                 spp_lean: 16,
-                spp_final: 128,
+                spp_final: 64,
                 working_height: None,
                 search_height: 64,
                 smoothness: 0.003,
@@ -790,6 +790,6 @@ mod tests {
         ] {
             assert!(json[stage].is_object(), "report.json's settings lack `{stage}`");
         }
-        assert_eq!(json["lighting"]["spp_final"], 128);
+        assert_eq!(json["lighting"]["spp_final"], 64);
     }
 }
