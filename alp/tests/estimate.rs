@@ -157,7 +157,8 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_has_its_ends_told_apart_by_the_photo()
     // The lean search starts from the kept end's score (on every pixel,
     // as the rival test scores: a search on the checkerboard scores its
     // start again).
-    (settings.pose_search.lean_step_deg, settings.pose_search.lean_on_checkerboard) = (0.3, false);
+    settings.pose_search.lean_step_deg = 0.3;
+    settings.pose_search.lean_on_checkerboard = false;
     let result = estimate(&photo, &probe, &settings).expect("an estimate");
     let report = &result.report;
     let ends = report.rival.as_ref().expect("a symmetric probe's ends are tested");
