@@ -181,6 +181,34 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_has_its_ends_told_apart_by_the_photo()
     let kept_db = if ends.kept_rival { ends.rival_db } else { ends.chosen_db };
     let lean = report.lean.as_ref().expect("a lean search");
     assert_eq!(lean.tried[0], (0.0, kept_db));
+    assert_eq!(lean_phases(report), lean.tried.len() - 1, "the start's score is reused");
+    let deg = axis_off(result.pose.rotation * Vec3::Y, &truth);
+    assert!(deg < 5.0, "probe axis off by {deg} degrees");
+}
+
+/// The lean search's scored candidates (one phase each).
+fn lean_phases(report: &alp::estimate::Report) -> usize {
+    report.phases.iter().filter(|p| p.name == "lighting_lean").count()
+}
+
+#[test]
+fn the_lean_search_on_the_checkerboard_scores_its_start_on_its_own_pixels() {
+    // The rival test scored the kept end on every pixel; a lean search on
+    // half of them cannot compare against that score, and scores its
+    // start again, as one more lean.
+    let (probe, truth, photo) = cap_with_a_mask_too_narrow(1);
+    let mut settings = Settings::new(Quality::Fast);
+    settings.env_size = (64, 32);
+    settings.pose_search.lean_step_deg = 0.3;
+    assert!(settings.pose_search.lean_on_checkerboard, "the default's lean search");
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    let lean = result.report.lean.as_ref().expect("a lean search");
+    assert_eq!(lean.tried[0].0, 0.0);
+    assert_eq!(
+        lean_phases(&result.report),
+        lean.tried.len(),
+        "every lean scored, the start too"
+    );
     let deg = axis_off(result.pose.rotation * Vec3::Y, &truth);
     assert!(deg < 5.0, "probe axis off by {deg} degrees");
 }
