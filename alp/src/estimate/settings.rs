@@ -310,6 +310,10 @@ pub struct OrientationSettings {
     /// pose a pixel or two off (the outline's fit) keeps a label's edge
     /// within a block, against the detail a block averages away.
     pub label_block_px: usize,
+    /// The scan's lowest minima (read at each pixel's centre) scored again
+    /// with every subpixel: more guard against the centre-read scan ranking
+    /// the best turn's minimum below others, at a full score each.
+    pub label_rescored: usize,
     /// A start within this RGB angle (degrees) of the chosen one's, at the
     /// other end or half a turn away, is a rival the photo judges.
     pub rival_rank_deg: f64,
@@ -537,6 +541,7 @@ impl Default for Settings {
                 yaw_refine_deg: 0.5,
                 label_scan_deg: 2.5,
                 label_block_px: 3,
+                label_rescored: 4,
                 rival_rank_deg: 1.0,
             },
             lighting: LightingSettings {

@@ -28,7 +28,7 @@ use crate::estimate::lighting::{
     FitRequest, LightingFit, LightingPurpose, LightingTerms, env_from_texels, fit_lighting, lighting_report,
 };
 use crate::estimate::photo::{Photo, Pixels};
-use crate::estimate::report::{AxisReport, PhaseLog, PhaseReport, StartReport};
+use crate::estimate::report::{AxisReport, PhaseLog, PhaseReport, PoseRecord, StartReport, resident_mb};
 use crate::estimate::settings::{OrientationSettings, Settings};
 use crate::objective::mask_mean_luminance;
 
@@ -417,8 +417,27 @@ impl Ranker<'_> {
         phases: &mut PhaseLog,
     ) -> Result<usize> {
         let o = &self.settings.orientation;
-        let (turn, _) = label.best_turn(&starts.poses[k], o);
-        let turn = (turn + 180.0).rem_euclid(360.0) - 180.0;
+        let t0 = Instant::now();
+        let found = label.best_turn(&starts.poses[k], o);
+        let mesh = &self.ctx.probe.asset.mesh;
+        phases.expect_more(1);
+        phases.push(PhaseReport {
+            name: "label_turn".into(),
+            iterations: 0,
+            evaluations: found.scored,
+            wall_s: t0.elapsed().as_secs_f64(),
+            loss: [("label_variation".to_string(), found.variation)].into(),
+            per_iteration: Vec::new(),
+            psnr_db: None,
+            pose: Some(PoseRecord::from(&hypotheses::turned(
+                &starts.poses[k],
+                mesh,
+                found.turn,
+            ))),
+            termination: None,
+            resident_mb: resident_mb(),
+        });
+        let turn = (found.turn + 180.0).rem_euclid(360.0) - 180.0;
         if turn.abs() < o.yaw_refine_deg {
             return Ok(k);
         }

@@ -51,6 +51,10 @@ const SUBPIXELS: [Vec2; 4] = [
     Vec2::new(0.25, 0.75),
     Vec2::new(0.75, 0.75),
 ];
+/// Where the full-circle scan samples a pixel's albedo: its centre, a
+/// quarter of the rays; the scan's lowest minima are scored again with
+/// `SUBPIXELS`.
+const CENTRE: [Vec2; 1] = [Vec2::new(0.5, 0.5)];
 
 impl<'a> LabelVariation<'a> {
     pub(in crate::estimate) fn new(
@@ -91,11 +95,11 @@ impl<'a> LabelVariation<'a> {
     /// The probe's albedo averaged over pixel `i` at the pose `to_mesh`
     /// inverts, with Schlick's Fresnel (towards white at grazing, as the
     /// photo is); None where a ray misses the probe.
-    fn albedo(&self, i: usize, to_mesh: &glam::Mat4) -> Option<[f32; 3]> {
+    fn albedo(&self, i: usize, to_mesh: &glam::Mat4, subpixels: &[Vec2]) -> Option<[f32; 3]> {
         let (camera, mesh) = (&self.photo.camera, &self.probe.asset.mesh);
         let w = self.photo.mask.width;
         let mut albedo = [0.0f32; 3];
-        for offset in SUBPIXELS {
+        for &offset in subpixels {
             let (origin, direction) = camera.primary_ray((i / w) as u32, (i % w) as u32, offset);
             let (o, d) = (to_mesh.transform_point3(origin), to_mesh.transform_vector3(direction));
             let hit = self.accel.closest_hit(o, d, f32::INFINITY)?;
@@ -109,7 +113,7 @@ impl<'a> LabelVariation<'a> {
             let grazing = (1.0 - normal.dot(d.normalize()).abs()).clamp(0.0, 1.0).powi(5);
             (0..3).for_each(|c| albedo[c] += f0[c] + (1.0 - f0[c]) * grazing);
         }
-        Some(albedo.map(|a| a / SUBPIXELS.len() as f32))
+        Some(albedo.map(|a| a / subpixels.len() as f32))
     }
 
     /// The mean over neighbouring block pairs (right and below) of the L1
@@ -117,6 +121,12 @@ impl<'a> LabelVariation<'a> {
     /// block's log ratio less its mean over the channels. Infinite when no
     /// pair is read.
     pub(in crate::estimate) fn at(&self, pose: &Pose) -> f64 {
+        self.sampled_at(pose, &SUBPIXELS)
+    }
+
+    /// The label variation at `pose` with each pixel's albedo averaged
+    /// over `subpixels`.
+    fn sampled_at(&self, pose: &Pose, subpixels: &[Vec2]) -> f64 {
         let to_mesh = pose.to_world().inverse();
         let w = self.photo.mask.width;
         let block = self.block;
@@ -125,7 +135,7 @@ impl<'a> LabelVariation<'a> {
         for (&(bx, by), photo) in self.blocks.iter().zip(&self.photo_means) {
             // A block read whole: none of its rays misses the probe.
             let albedo = block_pixels(block, bx, by, w).try_fold([0.0f32; 3], |mut sum, i| {
-                let a = self.albedo(i, &to_mesh)?;
+                let a = self.albedo(i, &to_mesh, subpixels)?;
                 (0..3).for_each(|c| sum[c] += a[c] / (block * block) as f32);
                 Some(sum)
             });
@@ -153,24 +163,32 @@ impl<'a> LabelVariation<'a> {
 
     /// The turn (degrees, about the probe's axis) of `pose` of least label
     /// variation: every `OrientationSettings::label_scan_deg` round the
-    /// circle, then halving steps about the best down to
-    /// `OrientationSettings::yaw_refine_deg`. Returns the turn and its
-    /// variation.
-    pub(in crate::estimate) fn best_turn(&self, pose: &Pose, o: &OrientationSettings) -> (f32, f64) {
+    /// circle with each pixel read at its centre; the scan's
+    /// `OrientationSettings::label_rescored` lowest minima scored again with
+    /// every subpixel, then halving steps about the best down to
+    /// `OrientationSettings::yaw_refine_deg`.
+    pub(in crate::estimate) fn best_turn(&self, pose: &Pose, o: &OrientationSettings) -> LabelTurn {
         let mesh = &self.probe.asset.mesh;
         let at = |turn: f32| self.at(&hypotheses::turned(pose, mesh, turn));
         let step = o.label_scan_deg.max(o.yaw_refine_deg);
         let scan: Vec<f32> = (0..(360.0 / step).ceil() as usize).map(|k| k as f32 * step).collect();
-        let scores: Vec<f64> = scan.par_iter().map(|&t| at(t)).collect();
-        let (mut best, mut score) = scan
+        let centred: Vec<f64> = scan
+            .par_iter()
+            .map(|&t| self.sampled_at(&hypotheses::turned(pose, mesh, t), &CENTRE))
+            .collect();
+        let minima = lowest_minima(&centred, o.label_rescored.max(1));
+        let scores: Vec<f64> = minima.par_iter().map(|&k| at(scan[k])).collect();
+        let mut scored = minima.len();
+        let (mut best, mut score) = minima
             .iter()
             .zip(&scores)
             .min_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(&t, &s)| (t, s))
+            .map(|(&k, &s)| (scan[k], s))
             .expect("at least one turn");
         let mut step = 0.5 * step;
         while step >= o.yaw_refine_deg {
             let (lower, upper) = rayon::join(|| at(best - step), || at(best + step));
+            scored += 2;
             for (t, s) in [(best - step, lower), (best + step, upper)] {
                 if s < score {
                     (best, score) = (t, s);
@@ -178,8 +196,38 @@ impl<'a> LabelVariation<'a> {
             }
             step *= 0.5;
         }
-        (best, score)
+        LabelTurn {
+            turn: best,
+            variation: score,
+            scored,
+        }
     }
+}
+
+/// The indices of `scores`' `count` lowest local minima round the circle
+/// (a plateau's first), lowest first.
+fn lowest_minima(scores: &[f64], count: usize) -> Vec<usize> {
+    let n = scores.len();
+    let mut minima: Vec<usize> = (0..n)
+        .filter(|&k| scores[k] < scores[(k + n - 1) % n] && scores[k] <= scores[(k + 1) % n])
+        .collect();
+    if minima.is_empty() {
+        // A flat circle: its first turn.
+        minima = (0..n.min(1)).collect();
+    }
+    minima.sort_by(|&a, &b| scores[a].total_cmp(&scores[b]));
+    minima.truncate(count);
+    minima
+}
+
+/// A turn found by its label variation.
+pub(in crate::estimate) struct LabelTurn {
+    /// Degrees about the probe's axis.
+    pub(in crate::estimate) turn: f32,
+    /// Its label variation.
+    pub(in crate::estimate) variation: f64,
+    /// The turns scored with every subpixel.
+    pub(in crate::estimate) scored: usize,
 }
 
 /// The row-major indices of the pixels of block (`bx`, `by`), `side`
@@ -206,11 +254,39 @@ mod tests {
         let label = LabelVariation::new(&probe, &photo, &clipped, &o).expect("a mask");
         let off = hypotheses::turned(&truth, &asset.mesh, 100.0);
         let off = Pose::new(off.rotation, off.scale, off.translation + Vec3::new(3e-4, 0.0, 0.0));
-        let (turn, score) = label.best_turn(&off, &o);
+        let LabelTurn {
+            turn, variation: score, ..
+        } = label.best_turn(&off, &o);
         let back = (turn + 100.0 + 180.0).rem_euclid(360.0) - 180.0;
         assert!(back.abs() < 2.0, "turned {turn} deg: {back} deg from the truth");
         // The measure at the found turn against the start's: the label's
         // edges divided out.
         assert!(score < 0.8 * label.at(&off), "{score} vs {}", label.at(&off));
+        // The scan read at the pixels' centres, its minima scored again in
+        // full: no turn of the scan's grid scores lower in full, at a
+        // tenth of the full scores.
+        let step = o.label_scan_deg;
+        let full = (0..(360.0 / step).ceil() as usize)
+            .map(|k| label.at(&hypotheses::turned(&off, &asset.mesh, k as f32 * step)))
+            .fold(f64::INFINITY, f64::min);
+        assert!(score <= full, "{score} against the full scan's {full}");
+        let found = label.best_turn(&off, &o);
+        assert!(
+            found.scored <= (360.0 / step) as usize / 10,
+            "{} full scores",
+            found.scored
+        );
+    }
+
+    #[test]
+    fn the_lowest_minima_go_round_the_circle() {
+        // Minima at 0 (by its neighbour 5 round the circle) and 3; a
+        // plateau counts once, by its first turn.
+        assert_eq!(lowest_minima(&[1.0, 2.0, 3.0, 0.5, 4.0, 2.0], 4), vec![3, 0]);
+        assert_eq!(lowest_minima(&[1.0, 2.0, 3.0, 0.5, 4.0, 2.0], 1), vec![3]);
+        assert_eq!(lowest_minima(&[2.0, 1.0, 1.0, 3.0], 4), vec![1]);
+        // A flat circle, or a single turn: its first.
+        assert_eq!(lowest_minima(&[f64::INFINITY; 3], 2), vec![0]);
+        assert_eq!(lowest_minima(&[7.0], 2), vec![0]);
     }
 }
