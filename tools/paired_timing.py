@@ -2,7 +2,7 @@
 
 The shared machines this project runs on change speed by up to a factor of two from one sitting to
 the next, and by tens of percent within one: a wall time means something only beside another
-measured alongside it. This runs `alp estimate` (default quality, 2 threads, seed 0) with each
+measured alongside it. This runs `alp estimate` (default quality unless `--quality`, 2 threads, seed 0) with each
 binary on each scene in turn, alternating the order from scene to scene (A B, then B A) so that a
 drift of the machine's speed falls on both, and prints per scene each binary's wall time, its final
 phase's time and its PSNR; then each binary's median and mean, and each binary's ratio to the first
@@ -11,7 +11,7 @@ should give the same maps can be checked with `cmp` on the `env.exr` files it le
 OUT/BINARY_NAME/SCENE. Python 3 standard library only.
 
     python3 tools/paired_timing.py --bins /tmp/alp_before /tmp/alp_after --scenes /tmp/alp_eval/scenes \
-        --out /tmp/paired [--only s1000,s1511] [--known]
+        --out /tmp/paired [--only s1000,s1511] [--known] [--quality fast]
 
 `--known` gives each run the scene's true pose (`--pose`): the lighting phases alone. Binaries with
 the same file name need separate folders (their outputs go to OUT/NAME).
@@ -27,11 +27,11 @@ import sys
 import time
 
 
-def run(binary, scene_dir, out, known):
+def run(binary, scene_dir, out, known, quality):
     with open(os.path.join(scene_dir, "probe.txt")) as f:
         probe = f.read().strip()
     cmd = [binary, "estimate", "--image", "image.exr", "--mask", "mask.png", "--camera", "camera.json",
-           "--probe", probe, "--out", out, "--quality", "default", "--threads", "2", "--seed", "0"]
+           "--probe", probe, "--out", out, "--quality", quality, "--threads", "2", "--seed", "0"]
     if known:
         cmd += ["--pose", "pose.json"]
     shutil.rmtree(out, ignore_errors=True)
@@ -56,6 +56,7 @@ def main():
     ap.add_argument("--out", required=True, help="where the estimates go, OUT/BINARY_NAME/SCENE")
     ap.add_argument("--only", default="", help="keep only scenes whose name contains one of these (comma-separated)")
     ap.add_argument("--known", action="store_true", help="give each run the scene's true pose")
+    ap.add_argument("--quality", default="default", choices=["fast", "default", "best"], help="alp estimate --quality")
     args = ap.parse_args()
     names = [os.path.basename(b) for b in args.bins]
     if len(set(names)) != len(names):
@@ -75,7 +76,7 @@ def main():
             order.reverse()
         for binary, name in order:
             r = run(os.path.abspath(binary), os.path.join(args.scenes, scene),
-                    os.path.join(os.path.abspath(args.out), name, scene), args.known)
+                    os.path.join(os.path.abspath(args.out), name, scene), args.known, args.quality)
             results[name][scene] = r
             print("%-42s %-14s %7.2f s  final %6.2f s  psnr %.2f dB" % (
                 scene, name, r["wall_s"], r["phases"].get("lighting_final", 0.0), r["psnr_db"]), flush=True)
