@@ -8,7 +8,6 @@
 use std::time::Instant;
 
 use glam::Vec3;
-use rayon::prelude::*;
 use render::camera::Camera;
 use render::integrator::{LightSampling, RenderSettings};
 use render::mesh::Mesh;
@@ -26,20 +25,17 @@ use crate::estimate::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecor
 use crate::estimate::settings::Settings;
 
 /// The lean (degrees) that maximises `score` within `reach` either way,
-/// by a line search: leans of 0 and of `step` either way (one call of
-/// `score`, which may score them side by side); while one side rises,
-/// steps doubling that way; then the vertex of the parabola through the
-/// best lean tried and its neighbours, where it is a maximum. `score`
-/// returns a score per lean asked, in order; a lean that cannot be scored
-/// scores minus infinity. Returns every (lean, score) tried, in order.
+/// by a line search: leans of 0 and of `step` either way; while one side
+/// rises, steps doubling that way; then the vertex of the parabola through
+/// the best lean tried and its neighbours, where it is a maximum. A lean
+/// that cannot be scored scores minus infinity. Returns every (lean,
+/// score) tried, in order.
 pub(in crate::estimate) fn line_search_max(
     step: f32,
     reach: f32,
-    mut scores: impl FnMut(&[f32]) -> Result<Vec<f64>>,
+    mut score: impl FnMut(f32) -> Result<f64>,
 ) -> Result<Vec<(f32, f64)>> {
-    let first = [0.0, -step, step];
-    let mut tried: Vec<(f32, f64)> = first.into_iter().zip(scores(&first)?).collect();
-    let mut score = |x: f32| -> Result<f64> { Ok(scores(&[x])?[0]) };
+    let mut tried = vec![(0.0, score(0.0)?), (-step, score(-step)?), (step, score(step)?)];
     let (centre, minus, plus) = (tried[0].1, tried[1].1, tried[2].1);
     if minus.max(plus) > centre {
         let (mut x, mut best) = match plus >= minus {
@@ -275,7 +271,7 @@ impl PhotoJudge<'_> {
         phase: &str,
         (step, reach): (f32, f32),
         pixels: Pixels,
-        candidate: &(dyn Fn(&Pose, f32) -> Pose + Sync),
+        candidate: &dyn Fn(&Pose, f32) -> Pose,
     ) -> Result<Option<LineSearchReport>> {
         if !self.searched || step <= 0.0 {
             return Ok(None);
@@ -421,59 +417,41 @@ impl PhotoJudge<'_> {
         (step, reach): (f32, f32),
         pixels: Pixels,
         mut scored: Option<(f64, Vec<f64>)>,
-        candidate: impl Fn(f32) -> Pose + Sync,
+        candidate: impl Fn(f32) -> Pose,
     ) -> Result<(Pose, (f64, Vec<f64>), LineSearchReport)> {
         // The searched pose's map, and the best candidate's (not their transports).
         let mut centre: Option<Vec<f64>> = None;
         let mut best: Option<(f32, Vec<f64>, f64)> = None;
-        let tried = line_search_max(step, reach, |xs| {
-            // The searched pose's score may be known; the others' fits run
-            // side by side (each its own phase, timed alone).
-            let known = match xs[0] == 0.0 {
+        let tried = line_search_max(step, reach, |x| {
+            let t1 = Instant::now();
+            let pose = candidate(x);
+            let known = match x == 0.0 {
                 true => scored.take(),
                 false => None,
             };
-            let fits: Vec<Option<(Result<(LightingFit, f64)>, Instant, f64)>> = xs
-                .par_iter()
-                .enumerate()
-                .map(|(i, &x)| {
-                    (i > 0 || known.is_none()).then(|| {
-                        let t1 = Instant::now();
-                        let fit = self.score(&candidate(x), start, pixels);
-                        (fit, t1, t1.elapsed().as_secs_f64())
-                    })
-                })
-                .collect();
-            let mut known = known;
-            let mut scores = Vec::with_capacity(xs.len());
-            for (&x, fit) in xs.iter().zip(fits) {
-                let (score, map) = match fit {
-                    None => known.take().expect("the searched pose's known score"),
-                    Some((Ok((fit, score)), t1, wall_s)) => {
+            let (score, map) = match known {
+                Some(known) => known,
+                None => match self.score(&pose, start, pixels) {
+                    Ok((fit, score)) => {
                         phases.expect_more(1);
                         phases.push(PhaseReport {
-                            pose: Some(PoseRecord::from(&candidate(x))),
-                            wall_s,
+                            pose: Some(PoseRecord::from(&pose)),
                             ..lighting_report(phase, &fit, t1)
                         });
                         (score, fit.into_map())
                     }
                     // A pose that takes the probe out of the view is no candidate.
-                    Some((Err(_), ..)) if x != 0.0 => {
-                        scores.push(f64::NEG_INFINITY);
-                        continue;
-                    }
-                    Some((Err(e), ..)) => return Err(e),
-                };
-                if centre.is_none() {
-                    centre = Some(map.clone());
-                }
-                if best.as_ref().is_none_or(|b| score > b.2) {
-                    best = Some((x, map, score));
-                }
-                scores.push(score);
+                    Err(_) if x != 0.0 => return Ok(f64::NEG_INFINITY),
+                    Err(e) => return Err(e),
+                },
+            };
+            if centre.is_none() {
+                centre = Some(map.clone());
             }
-            Ok(scores)
+            if best.as_ref().is_none_or(|b| score > b.2) {
+                best = Some((x, map, score));
+            }
+            Ok(score)
         })?;
         let (x, map, score) = best.expect("the line search scores the searched pose");
         let (kept, kept_scored) = match score > tried[0].1 + self.settings.pose_search.search_margin_db {
@@ -685,7 +663,7 @@ mod tests {
 
     /// The leans `line_search_max` tries on `score` (step 0.3, reach 2.4).
     fn leans_tried(score: impl Fn(f32) -> f64) -> Vec<(f32, f64)> {
-        line_search_max(0.3, 2.4, |xs| Ok(xs.iter().map(|&x| score(x)).collect())).unwrap()
+        line_search_max(0.3, 2.4, |x| Ok(score(x))).unwrap()
     }
 
     /// The best lean tried.
