@@ -328,9 +328,10 @@ impl Ranker<'_> {
         // about its axis shows none: a coarse map explains it about as well
         // either end up, and the starts go by their outlines.
         let best = best_ranked(&starts.reports, 0..starts.reports.len(), symmetric, o).expect("at least one start");
-        let chosen = self.refine_yaw(best, symmetric, &mut starts, phases)?;
         // A probe with a pattern of colours takes the turn its shading tells
-        // (lighting-free); the photo then judges only its other end.
+        // (lighting-free), scanned round the whole circle from the best
+        // start: no yaw to refine by colour first. The photo then judges
+        // only its other end.
         let label = match !symmetric && self.ctx.probe.colours_alike != Some(true) {
             true => Some(LabelVariation::new(
                 self.ctx.probe,
@@ -341,8 +342,8 @@ impl Ranker<'_> {
             false => None,
         };
         let chosen = match &label {
-            Some(label) => self.turn_by_label(label, chosen, &mut starts, phases)?,
-            None => chosen,
+            Some(label) => self.turn_by_label(label, best, &mut starts, phases)?,
+            None => self.refine_yaw(best, symmetric, &mut starts, phases)?,
         };
         let axis = starts.poses[chosen].rotation * Vec3::Y;
         let rivals = match symmetric {
