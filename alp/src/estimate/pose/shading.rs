@@ -254,9 +254,8 @@ mod tests {
         let label = LabelVariation::new(&probe, &photo, &clipped, &o).expect("a mask");
         let off = hypotheses::turned(&truth, &asset.mesh, 100.0);
         let off = Pose::new(off.rotation, off.scale, off.translation + Vec3::new(3e-4, 0.0, 0.0));
-        let LabelTurn {
-            turn, variation: score, ..
-        } = label.best_turn(&off, &o);
+        let found = label.best_turn(&off, &o);
+        let (turn, score) = (found.turn, found.variation);
         let back = (turn + 100.0 + 180.0).rem_euclid(360.0) - 180.0;
         assert!(back.abs() < 2.0, "turned {turn} deg: {back} deg from the truth");
         // The measure at the found turn against the start's: the label's
@@ -270,7 +269,6 @@ mod tests {
             .map(|k| label.at(&hypotheses::turned(&off, &asset.mesh, k as f32 * step)))
             .fold(f64::INFINITY, f64::min);
         assert!(score <= full, "{score} against the full scan's {full}");
-        let found = label.best_turn(&off, &o);
         assert!(
             found.scored <= (360.0 / step) as usize / 10,
             "{} full scores",
