@@ -151,15 +151,10 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_has_its_ends_told_apart_by_the_photo()
     // The outline hardly tells the cap's ends apart: the rival test lights
     // each end from its own pilot map, and the photo scores the right end
     // higher, whichever end the outline chose.
-    let (probe, truth, photo) = cap_with_a_mask_too_narrow(1);
-    let mut settings = Settings::new(Quality::Fast);
-    settings.env_size = (64, 32);
     // The lean search starts from the kept end's score (on every pixel,
     // as the rival test scores: a search on the checkerboard scores its
     // start again).
-    settings.pose_search.lean_step_deg = 0.3;
-    settings.pose_search.lean_on_checkerboard = false;
-    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    let (result, truth, settings) = lean_searched_cap(false);
     let report = &result.report;
     let ends = report.rival.as_ref().expect("a symmetric probe's ends are tested");
     let chosen = &report.starts[report.chosen_start.expect("the pose was searched")];
@@ -186,6 +181,19 @@ fn a_cap_whose_mask_is_a_pixel_too_narrow_has_its_ends_told_apart_by_the_photo()
     assert!(deg < 5.0, "probe axis off by {deg} degrees");
 }
 
+/// The cap with a mask a pixel too narrow, estimated at fast quality with
+/// a lean search (on a checkerboard of its pixels or on all): the
+/// estimate, the true pose and the settings.
+fn lean_searched_cap(on_checkerboard: bool) -> (alp::estimate::Estimate, Pose, Settings) {
+    let (probe, truth, photo) = cap_with_a_mask_too_narrow(1);
+    let mut settings = Settings::new(Quality::Fast);
+    settings.env_size = (64, 32);
+    settings.pose_search.lean_step_deg = 0.3;
+    settings.pose_search.lean_on_checkerboard = on_checkerboard;
+    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    (result, truth, settings)
+}
+
 /// The lean search's scored candidates (one phase each).
 fn lean_phases(report: &alp::estimate::Report) -> usize {
     report.phases.iter().filter(|p| p.name == "lighting_lean").count()
@@ -196,12 +204,11 @@ fn the_lean_search_on_the_checkerboard_scores_its_start_on_its_own_pixels() {
     // The rival test scored the kept end on every pixel; a lean search on
     // half of them cannot compare against that score, and scores its
     // start again, as one more lean.
-    let (probe, truth, photo) = cap_with_a_mask_too_narrow(1);
-    let mut settings = Settings::new(Quality::Fast);
-    settings.env_size = (64, 32);
-    settings.pose_search.lean_step_deg = 0.3;
-    assert!(settings.pose_search.lean_on_checkerboard, "the default's lean search");
-    let result = estimate(&photo, &probe, &settings).expect("an estimate");
+    assert!(
+        Settings::default().pose_search.lean_on_checkerboard,
+        "the default's lean search"
+    );
+    let (result, truth, _) = lean_searched_cap(true);
     let lean = result.report.lean.as_ref().expect("a lean search");
     assert_eq!(lean.tried[0].0, 0.0);
     assert_eq!(
