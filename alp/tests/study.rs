@@ -128,6 +128,43 @@ fn a_study_writes_its_tables_and_chart_and_a_rerun_skips_what_it_has() {
     let added: Vec<&str> = after[before.len()..].lines().collect();
     assert_eq!(added.len(), 2, "{added:?}");
     assert!(added.iter().all(|l| l.contains("\"variant\":\"lighting=adam\"")));
+    // --before: an earlier run's rows (here a copy of this one's) paired
+    // setting by setting with this run's, its front drawn beside this one's.
+    let earlier = dir.join("earlier");
+    std::fs::create_dir_all(&earlier).expect("mkdir");
+    std::fs::write(earlier.join("results.jsonl"), &after).expect("write");
+    let tables_before = |earlier: &Path| {
+        let flags = ["--families", "threads,lighting", "--tables-only", "--before"];
+        let mut flags = flags.to_vec();
+        flags.push(earlier.to_str().expect("utf-8"));
+        study(&scenes, &out, &flags)
+    };
+    let run = tables_before(&earlier);
+    assert!(run.status.success(), "before: {}", String::from_utf8_lossy(&run.stderr));
+    let paired = std::fs::read_to_string(out.join("before.md")).expect("before.md");
+    assert!(
+        paired.contains("against the same setting in")
+            && paired.contains("| threads | threads=1 | 2 | +0.00 +- 0.00 / +0.00 +- 0.00 / +0.00 +- 0.00 | 1.00 |")
+            && paired.contains("| default | default | 2 |"),
+        "{paired}"
+    );
+    assert!(out.join("before.csv").is_file());
+    let svg = std::fs::read_to_string(out.join("speed_accuracy.svg")).expect("svg");
+    assert!(svg.contains("Pareto front before") && svg.contains("default before"));
+    // An earlier folder without a study, or with none of these scenes: clear errors.
+    let e = tables_before(&dir.join("nothing"));
+    let stderr = String::from_utf8_lossy(&e.stderr);
+    assert!(
+        !e.status.success() && stderr.contains("results.jsonl") && stderr.contains("missing"),
+        "{stderr}"
+    );
+    std::fs::write(earlier.join("results.jsonl"), after.replace("\"can_", "\"tin_")).expect("write");
+    let e = tables_before(&earlier);
+    let stderr = String::from_utf8_lossy(&e.stderr);
+    assert!(
+        !e.status.success() && stderr.contains("--before") && stderr.contains("no run"),
+        "{stderr}"
+    );
     // A rerun on one of the scenes runs nothing and tables that scene only.
     let run = study(&scenes.join("can_1"), &out, &["--families", "threads,lighting"]);
     assert!(

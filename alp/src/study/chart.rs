@@ -17,6 +17,9 @@ const LEGEND_WIDTH: u32 = 190;
 /// The Pareto front's colour.
 const FRONT_GREY: RGBColor = RGBColor(150, 150, 150);
 
+/// The colour of an earlier run's front (`--before`).
+const BEFORE_GREY: RGBColor = RGBColor(60, 60, 60);
+
 /// The series' colours, in family order: one per perturbation of the
 /// stability study, no two alike.
 const PALETTE: [RGBColor; 14] = [
@@ -100,8 +103,14 @@ fn clear_of(p: (i32, i32), placed: &[(i32, i32)]) -> bool {
 /// sphere: one series per knob family (its settings and the default one,
 /// in order of time; the families in `apart` without the default: they
 /// are no knob turned from it), the Pareto front dashed, the default
-/// labelled.
-pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, apart: &[&str]) -> Result<String> {
+/// labelled. An earlier run's front and default (`before`, may be empty)
+/// beside them, thin and dark.
+pub fn speed_accuracy_svg(
+    summaries: &[VariantSummary],
+    default_variant: &str,
+    apart: &[&str],
+    before: &[VariantSummary],
+) -> Result<String> {
     let mut families: Vec<&str> = Vec::new();
     for s in summaries {
         if s.variant != default_variant && !families.contains(&s.family.as_str()) {
@@ -109,7 +118,9 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
         }
     }
     let default = summaries.iter().find(|s| s.variant == default_variant);
-    let walls: Vec<f64> = summaries.iter().map(|s| s.median_wall_s).filter(|&t| t > 0.0).collect();
+    let before_default = before.iter().find(|s| s.variant == default_variant);
+    let everything = || summaries.iter().chain(before);
+    let walls: Vec<f64> = everything().map(|s| s.median_wall_s).filter(|&t| t > 0.0).collect();
     let (t_lo, t_hi) = walls
         .iter()
         .fold((f64::INFINITY, 0.0f64), |(lo, hi), &t| (lo.min(t), hi.max(t)));
@@ -122,6 +133,12 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
         width: 5,
         ..Entry::line("Pareto front", FRONT_GREY)
     }];
+    if !before.is_empty() {
+        legend.push(Entry {
+            dashed: true,
+            ..Entry::line("Pareto front before", BEFORE_GREY)
+        });
+    }
     legend.extend(
         families
             .iter()
@@ -136,8 +153,7 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
         draw_legend(&key, &legend)?;
         for (k, panel) in panels.split_evenly((1, 3)).iter().enumerate() {
             let point = |s: &VariantSummary| (s.median_wall_s.max(t_lo), s.angular_deg[k]);
-            let errors: Vec<f64> = summaries
-                .iter()
+            let errors: Vec<f64> = everything()
                 .map(|s| s.angular_deg[k])
                 .filter(|e| e.is_finite())
                 .collect();
@@ -167,6 +183,23 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
                     5,
                     FRONT_GREY.stroke_width(5),
                 ))
+                .map_err(drawing)?;
+            let mut front_before: Vec<(f64, f64)> = before.iter().filter(|s| s.pareto[k]).map(point).collect();
+            front_before.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(DashedLineSeries::new(
+                    front_before.iter().copied(),
+                    6,
+                    4,
+                    BEFORE_GREY.stroke_width(2),
+                ))
+                .map_err(drawing)?;
+            chart
+                .draw_series(
+                    front_before
+                        .iter()
+                        .map(|&p| Circle::new(p, 3, BEFORE_GREY.stroke_width(1))),
+                )
                 .map_err(drawing)?;
             for (i, family) in families.iter().enumerate() {
                 let colour = PALETTE[i % PALETTE.len()];
@@ -214,6 +247,13 @@ pub fn speed_accuracy_svg(summaries: &[VariantSummary], default_variant: &str, a
                     .draw_series([EmptyElement::at(point(d))
                         + Circle::new((0, 0), 7, BLACK.stroke_width(2))
                         + Text::new("default", (9, -16), ("sans-serif", 14))])
+                    .map_err(drawing)?;
+            }
+            if let Some(d) = before_default.filter(|d| d.angular_deg[k].is_finite()) {
+                chart
+                    .draw_series([EmptyElement::at(point(d))
+                        + Circle::new((0, 0), 7, BEFORE_GREY.stroke_width(1))
+                        + Text::new("default before", (9, 4), ("sans-serif", 12))])
                     .map_err(drawing)?;
             }
         }
@@ -361,6 +401,31 @@ mod tests {
     }
 
     #[test]
+    fn an_earlier_runs_front_and_default_are_drawn_beside_this_runs() {
+        let now = [
+            summary("default", "default", 5.0, 3.0, true),
+            summary("quality", "quality=fast", 2.0, 4.0, true),
+        ];
+        let before = [
+            summary("default", "default", 10.0, 3.0, true),
+            summary("quality", "quality=fast", 4.0, 4.0, true),
+        ];
+        let without = speed_accuracy_svg(&now, "default", &[], &[]).expect("a chart");
+        let with = speed_accuracy_svg(&now, "default", &[], &before).expect("a chart");
+        let grey = format!(
+            "stroke=\"#{:02X}{:02X}{:02X}\"",
+            BEFORE_GREY.0, BEFORE_GREY.1, BEFORE_GREY.2
+        );
+        assert!(!without.contains(&grey) && !without.contains("Pareto front before"));
+        assert!(
+            with.contains(&grey) && with.contains("Pareto front before") && with.contains(">\ndefault before\n<"),
+            "{with}"
+        );
+        // The time axis reaches the earlier run's 10 s.
+        assert!(with.contains(">\n10\n<") && !without.contains(">\n10\n<"));
+    }
+
+    #[test]
     fn the_chart_has_a_series_per_family_the_front_and_the_default() {
         let s = [
             summary("default", "default", 5.0, 3.0, true),
@@ -370,7 +435,7 @@ mod tests {
             summary("outside", "outside=1", 20.0, 3.5, false),
             summary("outside", "outside=2", 40.0, 3.2, false),
         ];
-        let svg = speed_accuracy_svg(&s, "default", &["outside"]).expect("a chart");
+        let svg = speed_accuracy_svg(&s, "default", &["outside"], &[]).expect("a chart");
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
         for text in [
             "mirror sphere",

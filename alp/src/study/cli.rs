@@ -80,6 +80,12 @@ pub struct SpeedAccuracyArgs {
     /// skipped with a note.
     #[arg(long, default_value = "python3")]
     pub mitsuba_python: PathBuf,
+    /// An earlier run of this study (its output folder, e.g. by the build
+    /// before a change): its runs of this run's scenes and settings paired
+    /// with these scene by scene (before.csv, before.md), and its Pareto
+    /// front drawn beside this run's in the chart.
+    #[arg(long)]
+    pub before: Option<PathBuf>,
 }
 
 /// Runs a study command.
@@ -191,7 +197,32 @@ fn stability_run(args: &StabilityArgs) -> Result<()> {
 fn write_paired(out: &Path, rows: &[Row], reference: &str) -> Result<()> {
     let all = paired::paired(rows, reference);
     write_atomically(&out.join("paired.csv"), &paired::to_csv(&all))?;
-    write_atomically(&out.join("paired.md"), &paired::to_markdown(&all, reference))
+    write_atomically(
+        &out.join("paired.md"),
+        &paired::to_markdown(&all, &format!("`{reference}`")),
+    )
+}
+
+/// `before.csv` and `before.md`: each setting of `rows` against the same
+/// setting's run of the same scene in the study folder `dir` (its newest
+/// build's rows). The summaries of those runs, for the chart's front.
+fn write_before(out: &Path, dir: &Path, rows: &[Row]) -> Result<Vec<summary::VariantSummary>> {
+    let mut before = Results::read_newest(dir)?.rows;
+    before.retain(|b| rows.iter().any(|r| r.scene == b.scene && r.variant == b.variant));
+    if before.is_empty() {
+        return Err(Error::invalid(
+            "--before",
+            format!(
+                "{} holds no run of this study's scenes under its settings",
+                dir.join("results.jsonl").display()
+            ),
+        ));
+    }
+    let all = paired::against_before(rows, &before);
+    write_atomically(&out.join("before.csv"), &paired::to_csv(&all))?;
+    let reference = format!("the same setting in `{}`", dir.display());
+    write_atomically(&out.join("before.md"), &paired::to_markdown(&all, &reference))?;
+    Ok(summary::summarize(&before, &speed_accuracy::APART))
 }
 
 /// Notes below a Markdown table, a paragraph each.
@@ -243,9 +274,13 @@ fn speed_accuracy_run(args: &SpeedAccuracyArgs) -> Result<()> {
         write_atomically(&out.join("model.md"), &summary::by_probe_markdown(&groups))?;
     }
     write_paired(out, &rows, DEFAULT)?;
+    let before = match &args.before {
+        Some(dir) => write_before(out, dir, &rows)?,
+        None => Vec::new(),
+    };
     write_atomically(
         &out.join("speed_accuracy.svg"),
-        &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART)?,
+        &chart::speed_accuracy_svg(&summaries, DEFAULT, &speed_accuracy::APART, &before)?,
     )?;
     finished(&table, rows.len(), &out.join("speed_accuracy.svg"));
     Ok(())

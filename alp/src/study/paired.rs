@@ -42,19 +42,37 @@ impl Paired {
 /// Every setting of `rows` but `reference`, in the order first run, paired
 /// with `reference` on each scene; settings sharing no scene are left out.
 pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
-    let reference_on = |scene: &str| {
-        (rows.iter())
-            .find(|r| r.variant == reference && r.scene == scene)
-            .and_then(|r| Some((r.angular()?, r.wall_s)))
-    };
-    first_seen(rows.iter().filter(|r| r.variant != reference), |r| &r.variant)
+    let runs: Vec<&Row> = rows.iter().filter(|r| r.variant != reference).collect();
+    each_against(&runs, |_, scene| {
+        rows.iter().find(|r| r.variant == reference && r.scene == scene)
+    })
+}
+
+/// Every setting of `rows` paired with the same setting's run on the same
+/// scene in `before` (an earlier build's rows): what a change of the code
+/// did, setting by setting. Settings `before` never ran are left out.
+pub fn against_before(rows: &[Row], before: &[Row]) -> Vec<Paired> {
+    let runs: Vec<&Row> = rows.iter().collect();
+    each_against(&runs, |variant, scene| {
+        before.iter().find(|r| r.variant == variant && r.scene == scene)
+    })
+}
+
+/// Each setting of `runs`, in the order first run, against the reference
+/// run `reference_on(setting, scene)` finds, over the scenes both scored.
+fn each_against<'a>(runs: &[&Row], reference_on: impl Fn(&str, &str) -> Option<&'a Row>) -> Vec<Paired> {
+    first_seen(runs.iter().copied(), |r| &r.variant)
         .into_iter()
         .filter_map(|variant| {
-            let runs: Vec<&Row> = rows.iter().filter(|r| r.variant == variant).collect();
-            let pairs: Vec<([f64; 3], f64)> = (runs.iter())
+            let of_variant: Vec<&&Row> = runs.iter().filter(|r| r.variant == variant).collect();
+            let pairs: Vec<([f64; 3], f64)> = (of_variant.iter())
                 .filter_map(|r| {
-                    let (ours, (theirs, reference_wall)) = (r.angular()?, reference_on(&r.scene)?);
-                    Some((std::array::from_fn(|k| ours[k] - theirs[k]), r.wall_s / reference_wall))
+                    let reference = reference_on(variant, &r.scene)?;
+                    let (ours, theirs) = (r.angular()?, reference.angular()?);
+                    Some((
+                        std::array::from_fn(|k| ours[k] - theirs[k]),
+                        r.wall_s / reference.wall_s,
+                    ))
                 })
                 .collect();
             let n = pairs.len();
@@ -70,7 +88,7 @@ pub fn paired(rows: &[Row], reference: &str) -> Vec<Paired> {
                 let mut ratios: Vec<f64> = pairs.iter().map(|p| p.1).filter(|r| r.is_finite()).collect();
                 ratios.sort_by(f64::total_cmp);
                 Paired {
-                    family: runs[0].family.clone(),
+                    family: of_variant[0].family.clone(),
                     variant: variant.to_string(),
                     scenes: n,
                     mean_deg,
@@ -101,11 +119,12 @@ pub fn to_csv(all: &[Paired]) -> String {
     text
 }
 
-/// The paired changes as a Markdown table, changes past the noise in bold.
+/// The paired changes as a Markdown table, changes past the noise in bold;
+/// `reference` names the runs they are paired with, in Markdown.
 pub fn to_markdown(all: &[Paired], reference: &str) -> String {
     let names = Sphere::ALL.map(Sphere::name).join(" / ");
     let mut text = format!(
-        "| family | setting | scenes | change in angular error against `{reference}`, {names} (deg, mean +- s.e.) | \
+        "| family | setting | scenes | change in angular error against {reference}, {names} (deg, mean +- s.e.) | \
          time ratio (median) |\n|---|---|---|---|---|\n"
     );
     for p in all {
@@ -128,7 +147,7 @@ pub fn to_markdown(all: &[Paired], reference: &str) -> String {
         );
     }
     text += &format!(
-        "\nEach setting's error minus `{reference}`'s on the same scene; bold: past {PAST_NOISE} standard errors.\n"
+        "\nEach setting's error minus that of {reference} on the same scene; bold: past {PAST_NOISE} standard errors.\n"
     );
     text
 }
@@ -178,13 +197,40 @@ mod tests {
         assert_eq!(noisy.time_ratio, 0.5);
         assert!(steady.past_noise(0) && !steady.past_noise(1), "{steady:?}");
         assert_eq!(steady.time_ratio, 3.0);
-        let table = to_markdown(&all, "default");
+        let table = to_markdown(&all, "`default`");
         assert!(
             table.contains("| f | noisy | 3 | +2.00 +- 2.00 / +0.00 +- 0.00 / +0.00 +- 0.00 | 0.50 |"),
             "{table}"
         );
         assert!(table.contains("| f | steady | 3 | **+0.50 +- 0.06** /"), "{table}");
         assert_eq!(to_csv(&all).lines().count(), 3);
+    }
+
+    #[test]
+    fn each_setting_is_paired_with_its_own_earlier_run() {
+        let rows = [
+            row("a", "default", 2.0, 5.0),
+            row("b", "default", 3.0, 6.0),
+            row("a", "fast", 4.0, 1.0),
+            // A setting the earlier run does not have.
+            row("a", "new", 1.0, 1.0),
+        ];
+        let before = [
+            row("a", "default", 1.0, 10.0),
+            row("b", "default", 1.0, 12.0),
+            row("a", "fast", 5.0, 2.0),
+            row("a", "gone", 1.0, 1.0),
+        ];
+        let all = against_before(&rows, &before);
+        assert_eq!(
+            all.iter().map(|p| p.variant.as_str()).collect::<Vec<_>>(),
+            ["default", "fast"]
+        );
+        let (default, fast) = (&all[0], &all[1]);
+        // Differences 1 and 2: mean 1.5, s.d. sqrt(0.5), s.e. 0.5.
+        assert_eq!((default.scenes, default.time_ratio), (2, 0.5));
+        assert!((default.mean_deg[0] - 1.5).abs() < 1e-12 && (default.stderr_deg[0] - 0.5).abs() < 1e-12);
+        assert_eq!((fast.scenes, fast.mean_deg[0], fast.time_ratio), (1, -1.0, 0.5));
     }
 
     #[test]
