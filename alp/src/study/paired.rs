@@ -208,19 +208,22 @@ mod tests {
 
     #[test]
     fn each_setting_is_paired_with_its_own_earlier_run() {
+        // Scene, setting, mirror error, wall: "new" is a setting the earlier
+        // run does not have, "gone" one this run does not.
         let rows = [
-            row("a", "default", 2.0, 5.0),
-            row("b", "default", 3.0, 6.0),
-            row("a", "fast", 4.0, 1.0),
-            // A setting the earlier run does not have.
-            row("a", "new", 1.0, 1.0),
-        ];
+            ("a", "default", 2.0, 5.0),
+            ("b", "default", 3.0, 6.0),
+            ("a", "fast", 4.0, 1.0),
+            ("a", "new", 1.0, 1.0),
+        ]
+        .map(|(scene, variant, mirror, wall)| row(scene, variant, mirror, wall));
         let before = [
-            row("a", "default", 1.0, 10.0),
-            row("b", "default", 1.0, 12.0),
-            row("a", "fast", 5.0, 2.0),
-            row("a", "gone", 1.0, 1.0),
-        ];
+            ("a", "default", 1.0, 10.0),
+            ("b", "default", 1.0, 12.0),
+            ("a", "fast", 5.0, 2.0),
+            ("a", "gone", 1.0, 1.0),
+        ]
+        .map(|(scene, variant, mirror, wall)| row(scene, variant, mirror, wall));
         let all = against_before(&rows, &before);
         assert_eq!(
             all.iter().map(|p| p.variant.as_str()).collect::<Vec<_>>(),
