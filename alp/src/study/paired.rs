@@ -64,7 +64,7 @@ fn each_against<'a>(runs: &[&Row], reference_on: impl Fn(&str, &str) -> Option<&
     first_seen(runs.iter().copied(), |r| &r.variant)
         .into_iter()
         .filter_map(|variant| {
-            let of_variant: Vec<&&Row> = runs.iter().filter(|r| r.variant == variant).collect();
+            let of_variant: Vec<&Row> = runs.iter().copied().filter(|r| r.variant == variant).collect();
             let pairs: Vec<([f64; 3], f64)> = (of_variant.iter())
                 .filter_map(|r| {
                     let reference = reference_on(variant, &r.scene)?;
