@@ -3,14 +3,15 @@
 train and test splits, scored by `alp eval`, summarized per split, probe family and pose kind,
 with the train-test gap. Python 3 standard library only.
 
-    python3 tools/benchmark.py --alp target/release/alp --bench DIR [--splits train,test]
+    python3 tools/benchmark.py --alp target/release/alp --bench DIR [--splits train | test | train,test]
         [--quality default] [--inputs exact] [--threads 2] [--out DIR/results/default] [--only SUBSTR,...]
 
 Writes OUT/results.jsonl (one line per scene: scene.json's draw, `alp eval`'s fields, success,
 wall_s, cpu_s, max_rss_mb) and OUT/summary.md, and prints the summary. A rerun with the same
 binary keeps the lines it already has (delete results.jsonl to start over), so an interrupted
 run resumes; lines of scenes outside the run (another split) stay, and the summary covers every
-scene the same binary has run there. Tune on train; report test.
+scene the same binary has run there. Tune on train (the default split); read test once, at an
+issue's end (`--splits test`).
 
 `--inputs` picks the photo and mask each estimate is given (bench_scenes.py draws them): `exact`
 (image.exr, mask.png: the renderer's coverage), `traced` (mask_traced.png), `segmenter`
@@ -169,7 +170,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--alp", required=True, help="the alp binary")
     ap.add_argument("--bench", required=True, help="the benchmark folder (train/, test/) of bench_scenes.py")
-    ap.add_argument("--splits", default="train,test")
+    ap.add_argument("--splits", default="train",
+                    help="comma-separated splits; train unless told: test is read once, at an issue's end")
     ap.add_argument("--quality", default="default")
     ap.add_argument("--inputs", default="exact", choices=sorted(INPUTS),
                     help="the photo and mask as given: exact, or as people have them")

@@ -11,11 +11,13 @@ use render::camera::Camera;
 use render::envmap::EnvMap;
 use render::image_io::Mask;
 use render::pose::Pose;
+use render::probe::ProbeAsset;
 
 use render::colour::luminance;
 use render::envmap::resample;
 
 use crate::error::Result;
+use crate::pose_frame::{PoseFrame, PoseParts};
 use crate::relight::{RelightSettings, RelitSpheres, Sphere, evaluation_region, mirror_directions, relight};
 
 /// The angle in degrees between two RGB vectors.
@@ -414,6 +416,10 @@ pub struct EvalReport {
     /// Pose errors, when an estimated pose was given.
     #[serde(flatten)]
     pub pose: Option<PoseErrors>,
+    /// The pose's error split into its parts in the camera's frame at the
+    /// true pose ([`PoseFrame`]), when an estimated pose was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pose_parts: Option<PoseParts>,
 }
 
 impl EvalReport {
@@ -447,6 +453,31 @@ pub fn scene_file(scene: &Path, name: &str) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// The probe a scene folder's `probe.txt` names: a procedural probe's name
+/// or a probe folder relative to the scene's.
+pub fn scene_probe(scene: &Path) -> Result<ProbeAsset> {
+    let probe_txt = scene_file(scene, "probe.txt")?;
+    let reference = std::fs::read_to_string(&probe_txt).map_err(|e| RenderError::io(&probe_txt, "read", e))?;
+    let reference = reference.trim();
+    if reference.is_empty() {
+        return Err(RenderError::file(
+            &probe_txt,
+            "is empty: it names the probe (FORMATS.md, \"Scene folder\")",
+        )
+        .into());
+    }
+    match crate::probes::PROCEDURAL.contains(&reference) && !scene.join(reference).exists() {
+        true => crate::probes::procedural(reference),
+        false => crate::probes::load(&scene.join(reference)).map_err(|e| {
+            RenderError::file(
+                &probe_txt,
+                format!("names the probe `{reference}`, which does not read: {e}"),
+            )
+            .into()
+        }),
+    }
+}
+
 impl SceneTruth {
     /// Reads `camera.json` and `gt_env.exr` of a scene folder.
     pub fn read(scene: &Path) -> Result<Self> {
@@ -475,9 +506,14 @@ pub fn evaluate_scene(
     settings: &RelightSettings,
 ) -> Result<EvalReport> {
     let truth = SceneTruth::read(scene)?;
-    let pose = match extras.pose {
-        Some(est) => Some(pose_errors(est, &Pose::read(scene_file(scene, "pose.json")?)?)),
-        None => None,
+    let (pose, pose_parts) = match extras.pose {
+        Some(est) => {
+            let true_pose = Pose::read(scene_file(scene, "pose.json")?)?;
+            let (lo, hi) = scene_probe(scene)?.mesh.bounds();
+            let frame = PoseFrame::new(&truth.camera, &true_pose, 0.5 * (lo + hi), glam::Vec3::Y);
+            (Some(pose_errors(est, &true_pose)), Some(frame.parts(&true_pose, est)))
+        }
+        None => (None, None),
     };
     let est = relight(estimate, &truth.camera, settings)?;
     let gt = relight(&truth.env, &truth.camera, settings)?;
@@ -503,6 +539,7 @@ pub fn evaluate_scene(
         mirror_unseen: split.map(|s| s[1]),
         uncertainty: extras.uncertainty.map(|u| coverage(estimate, &truth.env, u)),
         pose,
+        pose_parts,
     })
 }
 
@@ -641,6 +678,7 @@ mod tests {
             mirror_unseen: None,
             uncertainty: None,
             pose: None,
+            pose_parts: None,
         };
         assert_eq!(
             report.to_json_line(),
@@ -668,5 +706,9 @@ mod tests {
                 .to_json_line()
                 .ends_with(r#""rotation_deg":1.0,"axis_deg":2.0,"translation_mm":3.0,"scale_ratio":4.0}"#)
         );
+        report.pose_parts = Some(crate::pose_frame::PoseParts::from_array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+        assert!(report.to_json_line().contains(
+            r#""pose_parts":{"across_x_mm":1.0,"across_y_mm":2.0,"along_mm":3.0,"in_view_deg":4.0,"lean_deg":5.0,"turn_deg":6.0}"#
+        ));
     }
 }

@@ -44,6 +44,7 @@ pub mod eval;
 pub mod insert;
 pub mod objective;
 pub mod output;
+pub mod pose_frame;
 pub mod probes;
 pub mod relight;
 pub mod study;

@@ -14,7 +14,7 @@ use serde::Deserialize;
 use crate::error::Result;
 use crate::estimate::symmetry::looks_alike_turned;
 use crate::estimate::{Photo, Settings};
-use crate::eval::{PoseErrors, scene_file};
+use crate::eval::{PoseErrors, scene_file, scene_probe};
 use crate::relight::{RelightSettings, RelitSpheres, relight};
 
 /// The scene folders under `dirs`: each a scene folder (it holds
@@ -134,25 +134,7 @@ impl StudyScene {
         let image = RgbImage::read_exr(&image_path)?;
         let mask = Mask::read_png(scene_file(dir, "mask.png")?)?;
         let photo = Photo::new(image, mask, camera).map_err(|e| e.in_file(&image_path))?;
-        let probe_txt = scene_file(dir, "probe.txt")?;
-        let reference = std::fs::read_to_string(&probe_txt).map_err(|e| RenderError::io(&probe_txt, "read", e))?;
-        let reference = reference.trim();
-        if reference.is_empty() {
-            return Err(RenderError::file(
-                &probe_txt,
-                "is empty: it names the probe (FORMATS.md, \"Scene folder\")",
-            )
-            .into());
-        }
-        let probe = match crate::probes::PROCEDURAL.contains(&reference) && !dir.join(reference).exists() {
-            true => crate::probes::procedural(reference)?,
-            false => crate::probes::load(&dir.join(reference)).map_err(|e| {
-                RenderError::file(
-                    &probe_txt,
-                    format!("names the probe `{reference}`, which does not read: {e}"),
-                )
-            })?,
-        };
+        let probe = scene_probe(dir)?;
         let env = EnvMap::read(scene_file(dir, "gt_env.exr")?)?;
         let pose = Pose::read(scene_file(dir, "pose.json")?)?;
         let meta_path = dir.join("scene.json");
