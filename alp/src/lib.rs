@@ -42,6 +42,7 @@ pub mod error;
 pub mod estimate;
 pub mod eval;
 pub mod insert;
+pub mod linalg;
 pub mod objective;
 pub mod output;
 pub mod pose_frame;

@@ -8,18 +8,40 @@
 //! the clear edges' profiles unexplained, summed over them (a single edge's
 //! best width is noisy: a highlight beside it fits a narrow step), less
 //! the width a sharp photo's own pixels and the profile's sampling give an
-//! edge (`SHARP_EDGE_PX`), is the blur. The renders of the probe
-//! then spread each pixel's rays by it (`Camera::footprint_px`), so that
-//! a soft photo is explained rather than fought.
+//! edge (`SHARP_EDGE_PX`), is the blur's reading.
+//!
+//! A reading is a guess until the photo checks it: a mirror's limb, or one
+//! reflecting large bright panels, reads soft on a sharp photo. So the
+//! output map's blur is the photo's choice ([`blur_by_photo`]): at the
+//! found pose the lighting is fitted on half the probe's pixels (a
+//! checkerboard) under each candidate blur -- none, and the reading --
+//! and judged on the other half, the probe's own rendered edges (its
+//! limb, rims, a label's edges) among them. A blurred model explains a
+//! sharp photo's edges only by sharpening its map where a map can, and not
+//! at all where the edge is the probe's; a sharp model explains a soft
+//! photo only by blurring its map, and not at the probe's edges. The blur
+//! is kept only if it lowers the held-out error in more blocks of pixels
+//! than an even split would by a margin in standard errors (blocks as the
+//! unit: neighbouring pixels' errors go together; each pixel's error from
+//! two independent renders, free of their Monte Carlo noise). The renders then spread each pixel's rays by it
+//! (`Camera::footprint_px`), so that a soft photo is explained rather
+//! than fought.
+
+use std::collections::HashMap;
 
 use glam::Vec2;
 use render::colour::luminance;
-use render::image_io::Mask;
-use render::silhouette::distance_transform;
+use render::integrator::RenderSettings;
+use render::pose::Pose;
+use render::sampling::EnvSampler;
 use serde::Serialize;
 
-use super::photo::Photo;
-use super::settings::BlurSettings;
+use super::Probe;
+use super::lighting::{FitRequest, LightingPurpose, LightingTerms, env_from_texels, fit_lighting, pixel_errors};
+use super::outline::outline_points;
+use super::photo::{Photo, Pixels};
+use super::report::{PhaseReport, resident_mb};
+use super::settings::{BlurSettings, LightModel, Settings};
 use crate::error::Result;
 use crate::objective::mask_mean_luminance;
 
@@ -48,6 +70,58 @@ pub struct BlurEstimate {
     pub edge_width_px: f32,
     /// The clear edges it was measured on.
     pub edges: usize,
+}
+
+/// One blur the lighting was fitted under at the found pose.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BlurCandidate {
+    /// The blur, a Gaussian's standard deviation in the photo's pixels.
+    pub blur_px: f32,
+    /// The held-out pixels' median weighted squared error (relative, summed
+    /// over the channels), over the pixels every candidate read.
+    pub held_out_error: f64,
+}
+
+/// The photo's choice of blur at the found pose ([`blur_by_photo`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BlurChoice {
+    /// Every blur fitted, none first.
+    pub candidates: Vec<BlurCandidate>,
+    /// The blur kept, pixels.
+    pub blur_px: f32,
+    /// The blocks of pixels whose held-out error the reading lowers, over
+    /// an even split, in standard errors of a sign test:
+    /// `(2 k - n) / sqrt(n)` (positive: the photo prefers the blur; kept
+    /// from `BlurSettings::test_margin_se`).
+    pub margin_se: f64,
+    /// The blocks of pixels (`BlurSettings::test_block_px` a side) the
+    /// margin was measured over, n.
+    pub blocks: usize,
+    /// Those whose error the reading lowers, k.
+    pub blocks_for_blur: usize,
+}
+
+impl BlurChoice {
+    /// The check's account as a phase of the report (`blur_test`), begun
+    /// at `started`: each candidate's held-out error and the margin.
+    pub(super) fn phase_report(&self, started: std::time::Instant) -> PhaseReport {
+        let mut loss: std::collections::BTreeMap<String, f64> = (self.candidates.iter())
+            .map(|c| (format!("held_out_error_at_{:.2}_px", c.blur_px), c.held_out_error))
+            .collect();
+        loss.insert("margin_se".into(), self.margin_se);
+        PhaseReport {
+            name: "blur_test".into(),
+            iterations: 0,
+            evaluations: self.candidates.len(),
+            wall_s: started.elapsed().as_secs_f64(),
+            loss,
+            per_iteration: Vec::new(),
+            psnr_db: None,
+            pose: None,
+            termination: None,
+            resident_mb: resident_mb(),
+        }
+    }
 }
 
 /// The blur of `photo` (see the module's description); a blur of 0 when
@@ -96,39 +170,125 @@ pub fn photo_blur(photo: &Photo, settings: &BlurSettings) -> Result<BlurEstimate
     })
 }
 
+/// What [`blur_by_photo`] fits at: the probe, the photo as the estimate
+/// works on it with a sharp camera (its pixels `factor` of the photo's),
+/// its clipped pixels, the found pose, and the pose's map at the searches'
+/// size `work` (it guides the light samples and starts each solve).
+pub(super) struct BlurTestInput<'a> {
+    pub(super) probe: &'a Probe<'a>,
+    pub(super) photo: &'a Photo,
+    pub(super) factor: f64,
+    pub(super) clipped: &'a [bool],
+    pub(super) pose: &'a Pose,
+    pub(super) map: &'a [f64],
+    pub(super) work: (usize, usize),
+}
+
+/// The blur the photo chooses between none and `reading_px` (pixels of
+/// the photo), see the module's description: the lighting fitted on a
+/// checkerboard of the probe's pixels under each, with the pose searches'
+/// samples and solve, and judged on the pixels held out.
+pub(super) fn blur_by_photo(input: &BlurTestInput, reading_px: f32, settings: &Settings) -> Result<BlurChoice> {
+    let lighting = &settings.lighting;
+    let terms = LightingTerms::quadratic(lighting.smoothness, lighting.method)?;
+    let sampler = EnvSampler::new(&env_from_texels(input.map, input.work.0, input.work.1)?);
+    // The bounce off the probe adds little at an edge and costs a third of the tracing.
+    let model = LightModel {
+        interreflection: false,
+        ..lighting.model
+    };
+    let sampling = model.sampling(Some(&sampler));
+    let spp = (lighting.final_spp(
+        settings.photo.blur.test_spp,
+        input.photo.mask.count(),
+        sampling.strategies(),
+    ))
+    .min(settings.photo.blur.test_spp);
+    let errors_under = |blur_px: f32| -> Result<HashMap<u32, f64>> {
+        let photo = input.photo.clone().with_blur(blur_px / input.factor as f32)?;
+        let fitted_on = FitRequest {
+            size: input.work,
+            render: RenderSettings {
+                spp,
+                seed: settings.seed.wrapping_add(81),
+            },
+            sampling,
+            terms: &terms,
+            purpose: LightingPurpose::Output,
+            pixels: Pixels::Checkerboard,
+            start: Some(input.map),
+            max_iters: lighting.lean_solve_iters,
+            term_values: false,
+        };
+        let (probe, clipped, pose) = (input.probe, input.clipped, input.pose);
+        let fit = fit_lighting(probe, &photo, clipped, pose, &fitted_on, lighting)?;
+        let held_out = FitRequest {
+            pixels: Pixels::HeldOut,
+            ..fitted_on
+        };
+        let errors = pixel_errors(probe, &photo, clipped, pose, &held_out, &fit.env, lighting)?;
+        Ok(errors.into_iter().collect())
+    };
+    let sharp = errors_under(0.0)?;
+    let blurred = errors_under(reading_px)?;
+    // Per block of pixels, the held-out error the blur takes away, over
+    // the pixels both models read. A pixel's error is heavy-tailed (a
+    // highlight a pixel off weighs as a hundred dark ones), so the blocks
+    // vote: a sign test, robust to a few pixels that neither model explains.
+    let block = settings.photo.blur.test_block_px.max(1) as u32;
+    let width = input.photo.camera.width;
+    let mut gains: HashMap<u32, f64> = HashMap::new();
+    let (mut sharp_errors, mut blurred_errors) = (Vec::new(), Vec::new());
+    for (&p, &e0) in &sharp {
+        if let Some(&e1) = blurred.get(&p) {
+            let key = (p / width) / block * width.div_ceil(block) + (p % width) / block;
+            *gains.entry(key).or_default() += e0 - e1;
+            sharp_errors.push(e0);
+            blurred_errors.push(e1);
+        }
+    }
+    let blocks = gains.len();
+    let for_blur = gains.values().filter(|&&g| g > 0.0).count();
+    let margin_se = match blocks {
+        0 => 0.0,
+        n => (2.0 * for_blur as f64 - n as f64) / (n as f64).sqrt(),
+    };
+    let blur_px = match margin_se >= settings.photo.blur.test_margin_se {
+        true => reading_px,
+        false => 0.0,
+    };
+    Ok(BlurChoice {
+        candidates: vec![
+            BlurCandidate {
+                blur_px: 0.0,
+                held_out_error: median(sharp_errors),
+            },
+            BlurCandidate {
+                blur_px: reading_px,
+                held_out_error: median(blurred_errors),
+            },
+        ],
+        blur_px,
+        margin_se,
+        blocks,
+        blocks_for_blur: for_blur,
+    })
+}
+
+/// The median of `values` (0 when empty).
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    match values.len() {
+        0 => 0.0,
+        n => values[n / 2],
+    }
+}
+
 /// The edge widths fitted, narrowest first.
 fn edge_widths() -> Vec<f32> {
     let (narrowest, factor, widest) = WIDTHS_PX;
     std::iter::successors(Some(narrowest), |s| Some(s * factor))
         .take_while(|&s| s <= widest)
-        .collect()
-}
-
-/// The mask's outline as points and outward normals: one per pixel whose
-/// centre lies within half a pixel of it, projected on to it along the
-/// gradient of the signed distance.
-fn outline_points(mask: &Mask) -> Vec<(Vec2, Vec2)> {
-    let (w, h) = (mask.width, mask.height);
-    let outside: Vec<bool> = mask.inside.iter().map(|&m| !m).collect();
-    let to_inside = distance_transform(&mask.inside, w, h);
-    let to_outside = distance_transform(&outside, w, h);
-    // Negative inside, positive outside; the outline at 0, half a pixel
-    // beyond the centres of the mask's edge pixels.
-    let signed: Vec<f32> = (0..w * h)
-        .map(|p| match mask.inside[p] {
-            true => 0.5 - to_outside[p],
-            false => to_inside[p] - 0.5,
-        })
-        .collect();
-    let at_px = |x: i64, y: i64| signed[y.clamp(0, h as i64 - 1) as usize * w + x.clamp(0, w as i64 - 1) as usize];
-    (0..w * h)
-        .filter(|&p| mask.inside[p] && signed[p] >= -0.5)
-        .filter_map(|p| {
-            let (x, y) = ((p % w) as i64, (p / w) as i64);
-            let gradient = Vec2::new(at_px(x + 1, y) - at_px(x - 1, y), at_px(x, y + 1) - at_px(x, y - 1));
-            let normal = gradient.try_normalize()?;
-            Some((Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - signed[p] * normal, normal))
-        })
         .collect()
 }
 

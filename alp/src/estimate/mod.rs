@@ -23,6 +23,7 @@
 pub mod blur;
 pub mod cli;
 pub mod lighting;
+pub mod outline;
 pub mod photo;
 pub mod pose;
 pub mod probe;
@@ -49,8 +50,9 @@ use probe::Probe;
 
 use lighting::{ClippedLight, LightingTerms, MapSizes, OutputSolve, env_from_texels, final_fit, lighting_report};
 use pose::orientation::PoseSearch;
+use pose::uncertainty::{UncertaintyInput, pose_uncertainty};
 use pose::{PoseFound, PoseInput};
-use report::{PhaseLog, WorkingImage};
+use report::{PhaseLog, PoseRecord, WorkingImage};
 
 use crate::error::{Error, Result};
 
@@ -86,8 +88,10 @@ pub fn estimate_with(
     let asset = along_y.as_ref().unwrap_or(asset);
     let known_pose = settings.known_pose.map(|pose| symmetry::turned_to_y(&pose, to_y));
     let probe = Probe::new(asset, bsdf, &settings.symmetry);
-    // The photo's blur, which every render of the probe then models.
-    let blur = match settings.photo.blur_px {
+    // The photo's blur: given, or read on the probe's edges. The pose
+    // searches model a reading from `min_blur_px`; the photo checks it at
+    // the found pose for the output map.
+    let reading = match settings.photo.blur_px {
         Some(blur_px) => blur::BlurEstimate {
             blur_px,
             edge_width_px: 0.0,
@@ -95,8 +99,13 @@ pub fn estimate_with(
         },
         None => blur::photo_blur(photo, &settings.photo.blur)?,
     };
-    let blurred = match blur.blur_px >= settings.photo.blur.min_blur_px {
-        true => Some(photo.clone().with_blur(blur.blur_px)?),
+    let search_blur = match settings.photo.blur_px {
+        Some(given) => given,
+        None if reading.blur_px >= settings.photo.blur.min_blur_px => reading.blur_px,
+        None => 0.0,
+    };
+    let blurred = match search_blur > 0.0 {
+        true => Some(photo.clone().with_blur(search_blur)?),
         false => None,
     };
     // The photo as the estimate works on it.
@@ -120,11 +129,62 @@ pub fn estimate_with(
         search: searched,
         judged,
     } = pose::method(settings.pose_method).find(&input, &mut phases)?;
-    // The output map.
+    // The blur the photo chooses at the found pose.
+    let t2 = Instant::now();
+    let blur_choice = match (settings.photo.blur_px, judged.pilot.as_deref()) {
+        (None, Some(map)) if reading.blur_px >= settings.photo.blur.test_from_px => {
+            let sharp = photo.clone().with_blur(0.0)?;
+            let input = blur::BlurTestInput {
+                probe: &probe,
+                photo: &sharp,
+                factor: working.factor,
+                clipped,
+                pose: &judged.pose,
+                map,
+                work: sizes.search,
+            };
+            let choice = blur::blur_by_photo(&input, reading.blur_px, settings)?;
+            phases.push(choice.phase_report(t2));
+            Some(choice)
+        }
+        _ => None,
+    };
+    let blur_px = blur_choice.as_ref().map_or(search_blur, |c| c.blur_px);
+    let chosen = match blur_px == search_blur {
+        true => None,
+        false => Some(photo.clone().with_blur(blur_px / working.factor as f32)?),
+    };
+    let photo = chosen.as_ref().unwrap_or(photo);
+    // How far the pose can move before the photo tells.
+    let pose_uncertainty = match settings.known_pose {
+        Some(_) => None,
+        None => {
+            let sharp = photo.camera.with_footprint(0.0)?;
+            let input = UncertaintyInput {
+                asset,
+                pose: &judged.pose,
+                camera: &sharp,
+                mask: &photo.mask,
+                searches: judged.part_searches(),
+            };
+            Some(pose_uncertainty(&input, &settings.pose_search))
+        }
+    };
+    // The output map, at the poses the photo cannot tell from the found one.
+    let poses = match &pose_uncertainty {
+        Some(uncertainty) => {
+            let (lo, hi) = asset.mesh.bounds();
+            let lighting = &settings.lighting;
+            let camera = photo.camera.with_footprint(0.0)?;
+            let (axes, from_px) = (lighting.pose_draw_axes, lighting.pose_draw_from_px);
+            uncertainty.draws(&judged.pose, &camera, 0.5 * (lo + hi), axes, from_px)
+        }
+        None => vec![(judged.pose, 1.0)],
+    };
     let t2 = Instant::now();
     let pilot = judged.pilot.as_deref();
     let output = OutputSolve { pilot, terms: &terms };
-    let (fit, final_spp) = final_fit(&probe, photo, clipped, &judged.pose, output, &sizes, settings)?;
+    let (fit, final_spp) = final_fit(&probe, photo, clipped, &poses, output, &sizes, settings)?;
     let final_psnr = fit.psnr_db();
     phases.push(lighting_report("lighting_final", &fit, t2));
     let clipped_lights = ClippedLight::found(
@@ -153,7 +213,8 @@ pub fn estimate_with(
                 spp: settings.photo.rerender_spp,
                 seed: settings.seed.wrapping_add(80),
             };
-            render_image(asset, &judged.pose, &full.camera, &map, bsdf, &render).0
+            let camera = full.camera.with_footprint(blur_px)?;
+            render_image(asset, &judged.pose, &camera, &map, bsdf, &render).0
         }
     };
     let (axes, starts, chosen_start) = searched.map(PoseSearch::into_accounts).unwrap_or_default();
@@ -167,6 +228,7 @@ pub fn estimate_with(
         size: judged.size,
         lean: judged.lean,
         photo_refinement: judged.refinement,
+        pose_uncertainty,
         working_resolution: sizes.work,
         search_resolution: sizes.search,
         min_roughness: sizes.min_roughness,
@@ -175,8 +237,14 @@ pub fn estimate_with(
         working_image: WorkingImage::of(photo, working.factor),
         clipped_pixels: clipped.iter().filter(|&&c| c).count(),
         clipped_lights,
-        blur,
+        blur: reading,
+        blur_choice,
+        blur_px,
         final_spp,
+        final_poses: poses
+            .iter()
+            .map(|(pose, share)| (PoseRecord::from(pose), *share))
+            .collect(),
         objective: report::ObjectiveReport::new(&settings.objective, terms.is_exact()),
         phases: phases.phases,
         psnr_db: final_psnr,

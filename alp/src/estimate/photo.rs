@@ -269,6 +269,8 @@ pub(super) enum Pixels {
     /// Those whose row and column sum to an even number: half the samples,
     /// transport and solve of the whole, spread evenly over the probe.
     Checkerboard,
+    /// The others: what a fit on the checkerboard held out.
+    HeldOut,
 }
 
 impl Pixels {
@@ -277,6 +279,7 @@ impl Pixels {
         match self {
             Pixels::All => true,
             Pixels::Checkerboard => (p % width + p / width).is_multiple_of(2),
+            Pixels::HeldOut => !(p % width + p / width).is_multiple_of(2),
         }
     }
 
@@ -292,7 +295,7 @@ impl Pixels {
         };
         match self {
             Pixels::All => [at(-1, 0), at(1, 0), at(0, -1), at(0, 1)],
-            Pixels::Checkerboard => [at(-1, -1), at(1, -1), at(-1, 1), at(1, 1)],
+            Pixels::Checkerboard | Pixels::HeldOut => [at(-1, -1), at(1, -1), at(-1, 1), at(1, 1)],
         }
     }
 }

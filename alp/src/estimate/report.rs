@@ -7,8 +7,9 @@ use render::image_io::{Mask, RgbImage};
 use render::pose::Pose;
 use serde::Serialize;
 
-use super::blur::BlurEstimate;
+use super::blur::{BlurChoice, BlurEstimate};
 use super::lighting::ClippedLight;
+use super::pose::uncertainty::PoseUncertainty;
 
 use super::photo::Photo;
 use super::settings::Settings;
@@ -67,6 +68,9 @@ pub struct Report {
     /// rival (`Settings::photo_refine_px`), each line search in order; the
     /// lean search is then left out.
     pub photo_refinement: Vec<RefinementStep>,
+    /// How far the pose can move before the photo tells, per part in the
+    /// camera's frame (none when the pose was given).
+    pub pose_uncertainty: Option<PoseUncertainty>,
     /// Working env map resolution (width, height) of the output map's
     /// solve, set by `min_roughness`.
     pub working_resolution: (usize, usize),
@@ -93,14 +97,26 @@ pub struct Report {
     /// one's direction, power and whether the photo tells that power or
     /// only a lower bound of it.
     pub clipped_lights: Vec<ClippedLight>,
-    /// The photo's blur: given (`--blur`), or measured on the probe's edges
-    /// (`estimate::blur`); every render of the probe spreads its pixels' rays
-    /// by it when it reaches `BlurSettings::min_blur_px`.
+    /// The photo's blur: given (`--blur`), or read on the probe's edges
+    /// (`estimate::blur`); the pose searches' renders spread their pixels'
+    /// rays by a reading from `BlurSettings::min_blur_px`.
     pub blur: BlurEstimate,
-    /// Samples per pixel of the final lighting solve: the settings', or
-    /// fewer for a probe so large in the photo that they would overrun
+    /// The photo's check of the reading at the found pose (none when the
+    /// blur was given, read below `BlurSettings::test_from_px`, or there
+    /// is no pilot map): each blur's held-out error and the margin.
+    pub blur_choice: Option<BlurChoice>,
+    /// The blur the output map's renders model, pixels.
+    pub blur_px: f32,
+    /// Samples per pixel and pose of the final lighting solve: the
+    /// settings' shared among `final_poses`, or fewer for a probe so large
+    /// in the photo that they would overrun
     /// `LightingSettings::final_sample_budget`.
     pub final_spp: u32,
+    /// The poses the output map explains the photo at, each with its share
+    /// of the data term: the found pose, and poses along the principal
+    /// axes of its uncertainty that move the probe in the image by
+    /// `LightingSettings::pose_draw_from_px` or more.
+    pub final_poses: Vec<(PoseRecord, f64)>,
     /// The objective's terms by phase.
     pub objective: ObjectiveReport,
     /// Every phase, in order.

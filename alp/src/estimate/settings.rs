@@ -176,10 +176,26 @@ pub struct BlurSettings {
 
     /// Profiles are divided by their level plus this share of the photo's.
     pub dark_level: f64,
-    /// A blur below this (pixels) is none: the renders keep a sharp camera.
-    /// Sharp photos measure up to 0.9 px (a mirror's limb is soft), and a
-    /// blur modelled where there is none costs more than one left out.
+    /// The pose searches model a blur read from this up (pixels); below,
+    /// they keep a sharp camera. Sharp photos read up to 0.9 px (a mirror's
+    /// limb is soft), and a blur modelled where there is none costs more
+    /// than one left out.
     pub min_blur_px: f32,
+    /// A reading from this up (pixels) is checked by the photo at the
+    /// found pose (`blur::blur_by_photo`); below, the output map's camera
+    /// is sharp. Each check costs two lighting fits of half the pixels.
+    pub test_from_px: f32,
+    /// The photo keeps the blur when its held-out error is lower by this
+    /// many standard errors: a false blur sharpens the map into blobs and
+    /// speckle, a missed one leaves the map soft, which costs less.
+    pub test_margin_se: f64,
+    /// The side (pixels) of the blocks whose errors the margin counts as
+    /// independent.
+    pub test_block_px: usize,
+    /// Samples per pixel and strategy of the check's fits and of each of
+    /// its two held-out renders: the sign test over blocks is robust to
+    /// their noise, and they are most of its time.
+    pub test_spp: u32,
 }
 
 /// What the asset tells of its axis and symmetry.
@@ -390,6 +406,16 @@ pub struct LightingSettings {
     /// covered, less telling). The errors' tails are heavier than a
     /// Gaussian's: 78 % lie within two (results 19.3).
     pub uncertainty_scale: f64,
+    /// The output map explains the photo at the found pose and at poses
+    /// drawn along this many principal axes of the pose's uncertainty
+    /// (`pose::uncertainty`, three poses per axis), their transports
+    /// stacked into one solve, the final samples shared among them (0: the
+    /// found pose alone).
+    pub pose_draw_axes: usize,
+    /// An axis is drawn along only if one deviation along it moves the
+    /// probe this far in the image (working pixels): a doubt below it
+    /// costs the map nothing, and fewer samples per pose cost a little.
+    pub pose_draw_from_px: f64,
 }
 
 /// The photo-scored pose searches.
@@ -425,6 +451,15 @@ pub struct PoseSearchSettings {
     pub size_step_px: f32,
     /// How far (pixels) the size search may grow or shrink the outline.
     pub size_reach_px: f32,
+    /// Outline points at most that the pose's uncertainty compares
+    /// (`pose::uncertainty`): its cost grows as their cube.
+    pub uncertainty_points: usize,
+    /// A photo-scored search's noise (dB): the pose's uncertainty along
+    /// a part it searched is how far the score falls by this much.
+    pub uncertainty_noise_db: f64,
+    /// Factor on the pose's deviations, set on the train split so that two
+    /// of them cover the true pose's error on most photos.
+    pub uncertainty_scale: f64,
 }
 
 /// Joint rounds after the search: the pose by Adam on the whole objective
@@ -486,6 +521,10 @@ impl Default for Settings {
                     min_edges: 20,
                     dark_level: 0.05,
                     min_blur_px: 1.0,
+                    test_from_px: 0.3,
+                    test_margin_se: 2.0,
+                    test_block_px: 8,
+                    test_spp: 8,
                 },
                 probe_box: BoxSettings {
                     ring_px: 4,
@@ -570,6 +609,8 @@ impl Default for Settings {
                 solve_iters: 300,
                 lean_solve_iters: 50,
                 uncertainty_scale: 0.77,
+                pose_draw_axes: 1,
+                pose_draw_from_px: 0.5,
             },
             pose_search: PoseSearchSettings {
                 lean_step_deg: 0.3,
@@ -581,6 +622,9 @@ impl Default for Settings {
                 turn_per_lean: 2.0,
                 size_step_px: 0.0,
                 size_reach_px: 2.0,
+                uncertainty_points: 256,
+                uncertainty_noise_db: 0.1,
+                uncertainty_scale: 1.0,
             },
             pose_method: PoseMethodName::OutlineThenPhoto,
             joint: JointSettings {

@@ -12,6 +12,7 @@ use render::pose::Pose;
 use render::probe::ProbeAsset;
 
 use super::settings::SymmetrySettings;
+use crate::linalg::symmetric_eigen;
 
 /// The probe turned so that its axis ([`axis_to_y`]) is mesh +Y: the
 /// rotation that does it and the turned asset (None: it was built along
@@ -379,44 +380,6 @@ pub fn axis_line(mesh: &Mesh, s: &SymmetrySettings) -> Option<(DVec3, DVec3)> {
         .or_else(|| axis_of_spread(mesh, s))
 }
 
-/// Eigenvalues and unit eigenvectors of a symmetric 3x3 matrix, by cyclic
-/// Jacobi rotations.
-pub(super) fn symmetric_eigen(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _ in 0..50 {
-        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
-        if off <= 1e-15 * scale {
-            break;
-        }
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            if a[p][q] == 0.0 {
-                continue;
-            }
-            let theta = 0.5 * (a[q][q] - a[p][p]) / a[p][q];
-            // The smaller root of t^2 + 2 theta t - 1 = 0 (1 for theta 0).
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
-            // A <- J^T A J and V <- V J, J the rotation in the (p, q) plane.
-            let rotate_columns = |m: &mut [[f64; 3]; 3]| {
-                for row in m.iter_mut() {
-                    let (mp, mq) = (row[p], row[q]);
-                    row[p] = c * mp - s * mq;
-                    row[q] = s * mp + c * mq;
-                }
-            };
-            rotate_columns(&mut a);
-            rotate_columns(&mut v);
-            let (ap, aq) = (a[p], a[q]);
-            a[p] = std::array::from_fn(|k| c * ap[k] - s * aq[k]);
-            a[q] = std::array::from_fn(|k| s * ap[k] + c * aq[k]);
-        }
-    }
-    // Eigenvector k is column k of v.
-    let vectors = std::array::from_fn(|k| [v[0][k], v[1][k], v[2][k]]);
-    ([a[0][0], a[1][1], a[2][2]], vectors)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -427,24 +390,6 @@ mod tests {
         Settings::default().symmetry
     }
     use render::procedural::SodaCan;
-
-    #[test]
-    fn the_eigen_decomposition_rebuilds_its_matrix() {
-        let a = [[2.0, -0.7, 0.3], [-0.7, 1.1, 0.05], [0.3, 0.05, 0.4]];
-        let (values, vectors) = symmetric_eigen(a);
-        for i in 0..3 {
-            for j in 0..3 {
-                let rebuilt: f64 = (0..3).map(|k| values[k] * vectors[k][i] * vectors[k][j]).sum();
-                assert!(
-                    (rebuilt - a[i][j]).abs() < 1e-12,
-                    "({i}, {j}): {rebuilt} against {}",
-                    a[i][j]
-                );
-                let dot: f64 = (0..3).map(|k| vectors[i][k] * vectors[j][k]).sum();
-                assert!((dot - (i == j) as u8 as f64).abs() < 1e-12);
-            }
-        }
-    }
 
     #[test]
     fn a_probe_s_axis_goes_to_y_whichever_way_its_mesh_was_built() {

@@ -328,6 +328,37 @@ impl Transport {
         }
     }
 
+    /// The transports `parts` (of one map size) as one: their pixels one
+    /// after another, in order. Several observations of one map -- a probe
+    /// at several poses, several probes, several exposures -- solved as one.
+    pub fn stacked(parts: &[&Transport]) -> Transport {
+        let first = parts.first().expect("Transport::stacked: at least one transport");
+        let (width, height) = (first.width, first.height);
+        let mut row_start = vec![0];
+        let (mut quantum, mut rows) = (Vec::new(), Vec::new());
+        for part in parts {
+            assert_eq!(
+                (part.width, part.height),
+                (width, height),
+                "Transport::stacked: a {}x{} transport among {width}x{height} ones",
+                part.width,
+                part.height
+            );
+            let offset = rows.len();
+            row_start.extend(part.row_start[1..].iter().map(|s| s + offset));
+            quantum.extend_from_slice(&part.quantum);
+            rows.extend_from_slice(&part.rows);
+        }
+        Transport {
+            width,
+            height,
+            pixels: quantum.len(),
+            row_start,
+            quantum,
+            rows,
+        }
+    }
+
     /// Number of env map values (texels x 3).
     pub fn unknowns(&self) -> usize {
         self.width * self.height * 3
@@ -673,6 +704,45 @@ mod lanes {
 mod tests {
     use super::*;
     use crate::envmap::{EnvMap, uv_to_direction};
+
+    #[test]
+    fn a_stack_of_transports_renders_each_one_s_pixels_and_pulls_back_their_sum() {
+        let (w, h) = (16, 8);
+        let env: Vec<f64> = (0..w * h * 3).map(|i| 0.2 + ((i * 37) % 11) as f64 * 0.1).collect();
+        let part = |pixels: usize, shift: f32| {
+            let (mut segment, mut uv, mut throughput) = (Vec::new(), Vec::new(), Vec::new());
+            for k in 0..40u32 {
+                segment.push(k % pixels as u32);
+                uv.push(Vec2::new(
+                    (k as f32 * 0.137 + shift).fract(),
+                    (k as f32 * 0.291).fract(),
+                ));
+                throughput.push([0.5 + 0.01 * k as f32, 0.3, 0.1 + shift]);
+            }
+            Transport::new(&segment, &uv, &throughput, pixels, w, h)
+        };
+        let (a, b) = (part(5, 0.0), part(3, 0.4));
+        let stacked = Transport::stacked(&[&a, &b]);
+        assert_eq!(stacked.pixels, 8);
+        let render = |t: &Transport| {
+            let mut out = vec![[0.0; 3]; t.pixels];
+            t.apply(&env, &mut out);
+            out
+        };
+        let mut want = render(&a);
+        want.extend(render(&b));
+        assert_eq!(render(&stacked), want);
+        let residual: Vec<[f64; 3]> = (0..8).map(|p| [p as f64 - 2.0, 0.5, 1.0 / (p as f64 + 1.0)]).collect();
+        let pulled = |t: &Transport, r: &[[f64; 3]]| {
+            let mut grad = vec![0.0; t.unknowns()];
+            t.pull_back(r, &mut grad);
+            grad
+        };
+        let (ga, gb) = (pulled(&a, &residual[..5]), pulled(&b, &residual[5..]));
+        for ((s, x), y) in pulled(&stacked, &residual).iter().zip(&ga).zip(&gb) {
+            assert!((s - (x + y)).abs() < 1e-12 * (1.0 + s.abs()), "{s} against {x} + {y}");
+        }
+    }
 
     #[test]
     fn the_transport_renders_what_the_samples_read_and_its_transpose_is_its_adjoint() {

@@ -176,16 +176,17 @@ pub(super) struct OutputSolve<'a> {
     pub(super) terms: &'a LightingTerms,
 }
 
-/// The output map's fit at `pose`: at `Settings::spp_final`, minimising
-/// `output`'s terms from its pilot map. The transport is
+/// The output map's fit at `poses` (the found pose first, each with its
+/// share: [`fit_lighting_over`]): at `Settings::spp_final` shared among
+/// them, minimising `output`'s terms from its pilot map. The transport is
 /// `LightingSettings::model`'s (by default one bounce of inter-reflection:
 /// a can's lid sees its rim, which reflects the sky). Returns the fit and
-/// its samples per pixel.
+/// its samples per pixel at each pose.
 pub(super) fn final_fit(
     probe: &Probe,
     photo: &Photo,
     clipped: &[bool],
-    pose: &Pose,
+    poses: &[(Pose, f64)],
     OutputSolve { pilot, terms }: OutputSolve,
     sizes: &MapSizes,
     settings: &Settings,
@@ -198,16 +199,17 @@ pub(super) fn final_fit(
     let sampling = settings.lighting.model.sampling(sampler.as_ref());
     let spp = settings
         .lighting
-        .final_spp(settings.lighting.spp_final, photo.mask.count(), sampling.strategies());
+        .final_spp(settings.lighting.spp_final, photo.mask.count(), sampling.strategies())
+        .div_ceil(poses.len() as u32);
     let render = RenderSettings {
         spp,
         seed: settings.seed.wrapping_add(77),
     };
-    let fit = fit_lighting(
+    let fit = fit_lighting_over(
         probe,
         photo,
         clipped,
-        pose,
+        poses,
         &FitRequest {
             size: sizes.work,
             render,
@@ -244,6 +246,105 @@ pub(super) struct FitRequest<'a> {
     pub(super) term_values: bool,
 }
 
+/// Whether a fit for the output map reads the pixels on the probe's
+/// reflectance edges ([`albedo_edges`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Edges {
+    /// Left out: a pose a fraction of a pixel off would bake the probe's
+    /// colours into the map.
+    LeftOut,
+    /// Read: where a photo's blur shows most.
+    Read,
+}
+
+/// The light samples `request` asks for at `pose`, traced on its pixels,
+/// and the data term over them: for the output map each pixel weighed by
+/// the square of the share of its light the model follows, and the
+/// reflectance edges as `edges` says.
+pub(super) fn weighed_samples(
+    probe: &Probe,
+    photo: &Photo,
+    clipped: &[bool],
+    pose: &Pose,
+    request: &FitRequest,
+    lighting: &LightingSettings,
+    edges: Edges,
+) -> Result<(SampleRecord, DataTerm)> {
+    let (settings, sampling, pixels) = (&request.render, &request.sampling, request.pixels);
+    // Light samples in passes: memory stays that of one pass however many
+    // samples the transport gathers (with MIS a hit has two).
+    let passes = settings
+        .spp
+        .div_ceil(lighting.spp_per_pass(sampling.strategies() * photo.mask.count()))
+        .max(1);
+    let camera = &photo.camera;
+    let keep = |p: u32| pixels.keeps(p, camera.width);
+    let record = SampleRecord::trace(probe.asset, probe.bsdf, pose, camera, settings, sampling, passes, keep)?;
+    let mut data = pixel_targets(photo, &record.hits, clipped, request.purpose, lighting)?;
+    if request.purpose == LightingPurpose::Output {
+        let r = &record;
+        let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());
+        if edges == Edges::LeftOut {
+            let on_edge = albedo_edges(r, &shares.direct, pixels, lighting);
+            data.weight
+                .iter_mut()
+                .zip(&on_edge)
+                .filter(|(_, e)| **e)
+                .for_each(|(w, _)| *w = [0.0; 3]);
+        }
+        data.weight
+            .iter_mut()
+            .zip(&shares.followed)
+            .for_each(|(w, f)| w.iter_mut().for_each(|w| *w *= f * f));
+    }
+    Ok((record, data))
+}
+
+/// The map `env` (of `request.size`) judged on the pixels `request` asks
+/// for at `pose`, the probe's reflectance edges read: per pixel read, its
+/// index in the photo and its weighted squared error summed over the
+/// channels (the data term's weights: relative errors, whatever the
+/// photo's exposure). The error is the product of two renders' residuals
+/// from independent light samples, `w (a - t)(b - t)`, whose expectation
+/// is the squared error of the expected render: one render's own square
+/// would add its Monte Carlo variance, which differs from model to model
+/// (a blurred camera's rays spread over a pixel's neighbours).
+pub(super) fn pixel_errors(
+    probe: &Probe,
+    photo: &Photo,
+    clipped: &[bool],
+    pose: &Pose,
+    request: &FitRequest,
+    env: &[f64],
+    lighting: &LightingSettings,
+) -> Result<Vec<(u32, f64)>> {
+    let residuals = |seed: u64| -> Result<BTreeMap<u32, [f64; 3]>> {
+        let request = FitRequest {
+            render: RenderSettings { seed, ..request.render },
+            ..*request
+        };
+        let (record, data) = weighed_samples(probe, photo, clipped, pose, &request, lighting, Edges::Read)?;
+        let transport = record.transport(request.size.0, request.size.1);
+        let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];
+        transport.apply(env, &mut rendered);
+        Ok((record.hits.pixels.iter().enumerate())
+            .filter(|&(k, _)| data.used(k))
+            .map(|(k, &p)| {
+                let w = data.weight[k];
+                (
+                    p,
+                    std::array::from_fn(|c| w[c].sqrt() * data.residual(k, c, rendered[k][c])),
+                )
+            })
+            .collect())
+    };
+    let a = residuals(request.render.seed)?;
+    let b = residuals(request.render.seed.wrapping_add(1 << 20))?;
+    Ok((a.iter())
+        .filter_map(|(p, ra)| b.get(p).map(|rb| (*p, (0..3).map(|c| ra[c] * rb[c]).sum())))
+        .collect())
+}
+
 /// The lighting at `pose` that `request` asks for: light samples traced,
 /// their transport recorded, the map solved.
 pub(super) fn fit_lighting(
@@ -254,43 +355,52 @@ pub(super) fn fit_lighting(
     request: &FitRequest,
     lighting: &LightingSettings,
 ) -> Result<LightingFit> {
+    fit_lighting_over(probe, photo, clipped, &[(*pose, 1.0)], request, lighting)
+}
+
+/// The lighting that explains the photo at each of `poses` at once (each
+/// with its share of the data term, the shares summing to 1): each pose's
+/// light samples traced (its own seed past `request`'s, the first's
+/// `request`'s own), their transports stacked into one solve of one map.
+/// Poses the photo cannot tell apart so soften the map where they disagree
+/// rather than warp it to one of them. The fit's pixels, transport and
+/// data are the first pose's.
+pub(super) fn fit_lighting_over(
+    probe: &Probe,
+    photo: &Photo,
+    clipped: &[bool],
+    poses: &[(Pose, f64)],
+    request: &FitRequest,
+    lighting: &LightingSettings,
+) -> Result<LightingFit> {
     let FitRequest {
         size,
         render: ref settings,
-        ref sampling,
         terms,
         purpose,
-        pixels,
         start,
         max_iters,
         term_values,
+        ..
     } = *request;
-    // Light samples in passes: memory stays that of one pass however many
-    // samples the transport gathers (with MIS a hit has two).
-    let passes = settings
-        .spp
-        .div_ceil(lighting.spp_per_pass(sampling.strategies() * photo.mask.count()))
-        .max(1);
-    let camera = &photo.camera;
-    let keep = |p: u32| pixels.keeps(p, camera.width);
-    let record = SampleRecord::trace(probe.asset, probe.bsdf, pose, camera, settings, sampling, passes, keep)?;
-    let mut data = pixel_targets(photo, &record.hits, clipped, purpose, lighting)?;
-    let scene = TapeScene::new(photo, pose, &record.hits.pixels, settings.seed);
-    if purpose == LightingPurpose::Output {
-        let r = &record;
-        let shares = LitShares::new(&r.segment, &r.direct, &r.lit, &r.env_sampled, r.hits.pixels.len());
-        let edges = albedo_edges(r, &shares.direct, pixels, lighting);
-        data.weight
-            .iter_mut()
-            .zip(&edges)
-            .filter(|(_, e)| **e)
-            .for_each(|(w, _)| *w = [0.0; 3]);
-        data.weight
-            .iter_mut()
-            .zip(&shares.followed)
-            .for_each(|(w, f)| w.iter_mut().for_each(|w| *w *= f * f));
-    }
-    let data = Arc::new(data);
+    let observations: Vec<(SampleRecord, DataTerm)> = (poses.iter().enumerate())
+        .map(|(k, (pose, _))| {
+            let request = FitRequest {
+                render: RenderSettings {
+                    seed: settings.seed.wrapping_add((k as u64) << 40),
+                    ..*settings
+                },
+                ..*request
+            };
+            weighed_samples(probe, photo, clipped, pose, &request, lighting, Edges::LeftOut)
+        })
+        .collect::<Result<_>>()?;
+    let pixels: Vec<u32> = observations
+        .iter()
+        .flat_map(|(r, _)| r.hits.pixels.iter().copied())
+        .collect();
+    let scene = TapeScene::new(photo, &poses[0].0, &pixels, settings.seed);
+    let data = Arc::new(stacked_data(&observations, poses));
     let solve_settings = LightingSolve {
         relative_smoothness: purpose == LightingPurpose::Output,
         floor_of_level: match purpose {
@@ -301,7 +411,13 @@ pub(super) fn fit_lighting(
         max_iters,
         method: lighting.method,
     };
-    let at = |(w, h): (usize, usize)| Arc::new(record.transport(w, h));
+    let at = |(w, h): (usize, usize)| match &observations[..] {
+        [(record, _)] => Arc::new(record.transport(w, h)),
+        several => {
+            let parts: Vec<Transport> = several.iter().map(|(r, _)| r.transport(w, h)).collect();
+            Arc::new(Transport::stacked(&parts.iter().collect::<Vec<_>>()))
+        }
+    };
     // The finest level's start, which also sets its smoothness's levels.
     let (transport, solved, finest_start) = match start {
         Some(x0) => {
@@ -368,7 +484,7 @@ pub(super) fn fit_lighting(
         evaluations,
         termination,
     } = solved;
-    let mut rendered = vec![[0.0; 3]; record.hits.pixels.len()];
+    let mut rendered = vec![[0.0; 3]; transport.pixels];
     transport.apply(&env, &mut rendered);
     let (term_values, sigma) = match term_values {
         true => {
@@ -383,6 +499,17 @@ pub(super) fn fit_lighting(
         }
         false => (BTreeMap::new(), Vec::new()),
     };
+    // The first pose's pixels, transport and data are the fit's.
+    let (record, first_data) = observations.into_iter().next().expect("at least one pose");
+    let (transport, rendered, data) = match poses.len() {
+        1 => (transport, rendered, data),
+        _ => {
+            let first = Arc::new(record.transport(size.0, size.1));
+            let mut rendered = vec![[0.0; 3]; first.pixels];
+            first.apply(&env, &mut rendered);
+            (first, rendered, Arc::new(first_data))
+        }
+    };
     Ok(LightingFit {
         hits: record.hits,
         transport,
@@ -394,6 +521,22 @@ pub(super) fn fit_lighting(
         term_values,
         sigma,
     })
+}
+
+/// The observations' data terms one after another, each pixel's weights
+/// times its pose's share.
+fn stacked_data(observations: &[(SampleRecord, DataTerm)], poses: &[(Pose, f64)]) -> DataTerm {
+    if let [(_, data)] = observations {
+        return data.clone();
+    }
+    let mut stacked = DataTerm::default();
+    for ((_, data), (_, share)) in observations.iter().zip(poses) {
+        stacked.target.extend_from_slice(&data.target);
+        stacked.weight.extend(data.weight.iter().map(|w| w.map(|w| w * share)));
+        stacked.at_least.extend_from_slice(&data.at_least);
+        stacked.tolerance.extend_from_slice(&data.tolerance);
+    }
+    stacked
 }
 
 /// The data term for `purpose`, aligned with `hits.pixels`: each pixel's

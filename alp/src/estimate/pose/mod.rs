@@ -12,6 +12,7 @@ pub mod orientation;
 pub mod ranking;
 pub mod shading;
 pub mod silhouette;
+pub mod uncertainty;
 
 use render::pose::Pose;
 use render::silhouette::ReferenceMask;
