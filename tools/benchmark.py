@@ -39,6 +39,8 @@ INPUTS = {"exact": ("image.exr", "mask.png"), "traced": ("image.exr", "mask_trac
           "segmenter": ("image.exr", "mask_segmenter.png"), "blur": ("image_blur.exr", "mask.png"),
           "jpeg": ("image.jpg", "mask.png"), "box": ("image.exr", "box.txt")}
 POSE_KINDS = ("upright", "tilted", "lying")
+# The pose's parts (alp::pose_frame): what alp eval splits the error into and report.json's deviations.
+PARTS = ("across_x_mm", "across_y_mm", "along_mm", "in_view_deg", "lean_deg", "turn_deg")
 
 
 def found(rec):
@@ -92,6 +94,12 @@ def run_scene(args, split, scene_dir, cache):
         rec.update(wall_s=round(wall, 3), cpu_s=round(cpu, 3), max_rss_mb=round(rss, 1))
         ev = es.evaluate(args.alp, args.out, scene_dir, est_dir, args.eval_spp, cache, args.alp_sha)
         rec.update({k: v for k, v in ev.items() if k != "scene"})
+        with open(os.path.join(est_dir, "report.json")) as f:
+            report = json.load(f)
+        uncertainty = report.get("pose_uncertainty")
+        rec["pose_sigma"] = uncertainty and uncertainty["sigma"]
+        rec["warnings"] = report.get("warnings", [])
+        rec["blur_px"] = report.get("blur_px")
     except (es.AlpError, OSError, ValueError, KeyError) as e:
         rec["error"] = str(e)
     rec["success"] = found(rec)
@@ -155,6 +163,27 @@ def summary(records, cmdline):
             groups = sorted({r[key] for r in by[s]}, key=lambda g: (POSE_KINDS.index(g) if g in POSE_KINDS else 9, g))
             lines += ["", "## %s, by %s" % (s, title), "", head % title]
             lines += [row(g, stats([r for r in by[s] if r[key] == g])) for g in groups]
+    covered = [r for r in records if r.get("pose_sigma") and r.get("pose_parts")]
+    if covered:
+        lines += ["", "## The pose's uncertainty", "",
+                  "How often the found pose's error lies within two of its reported deviations (alp eval's "
+                  "pose_parts against report.json's pose_uncertainty), per part over the photos that tell it, and "
+                  "over every part told at once; the median deviation; photos with a warning.", "",
+                  "| split | " + " | ".join(PARTS) + " | all parts | photos warned |",
+                  "|---|" + "---|" * (len(PARTS) + 2)]
+        for s in splits:
+            rs = [r for r in covered if r["split"] == s]
+            if not rs:
+                continue
+            within = lambda r, p: abs(r["pose_parts"][p]) <= 2.0 * r["pose_sigma"][p]
+            cells = []
+            for p in PARTS:
+                told = [r for r in rs if r["pose_sigma"].get(p) is not None]
+                cells.append("%.0f %% of %d (%s)" % (100.0 * sum(within(r, p) for r in told) / max(len(told), 1),
+                                                   len(told), es.fmt(es.median([r["pose_sigma"][p] for r in told]))))
+            every = sum(all(within(r, p) for p in PARTS if r["pose_sigma"].get(p) is not None) for r in rs)
+            lines.append("| %s | %s | %.0f %% of %d | %d |" % (s, " | ".join(cells), 100.0 * every / len(rs), len(rs),
+                                                          sum(bool(r.get("warnings")) for r in by[s])))
     failed = [r for r in records if not r["success"]]
     if failed:
         lines += ["", "## Poses not found", "", "| split | scene | rotation | axis | translation (mm) | error |",

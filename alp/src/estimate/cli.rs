@@ -152,6 +152,9 @@ pub fn run(args: &EstimateArgs) -> Result<()> {
              its hidden part is unseen and its pose (and the lighting with it) less certain"
         );
     }
+    for warning in &result.report.warnings {
+        eprintln!("alp: warning: {warning}");
+    }
     if verbose {
         for p in &result.report.phases {
             eprintln!("  {:<15} {:>4} evals {:>7.2} s", p.name, p.evaluations, p.wall_s);

@@ -22,6 +22,7 @@
 
 pub mod blur;
 pub mod cli;
+pub mod decisions;
 pub mod lighting;
 pub mod outline;
 pub mod photo;
@@ -159,15 +160,14 @@ pub fn estimate_with(
     let pose_uncertainty = match settings.known_pose {
         Some(_) => None,
         None => {
-            let sharp = photo.camera.with_footprint(0.0)?;
             let input = UncertaintyInput {
                 asset,
                 pose: &judged.pose,
-                camera: &sharp,
-                mask: &photo.mask,
+                photo,
                 searches: judged.part_searches(),
+                alike_turned: probe.alike_turned == Some(true) || searched.as_ref().is_some_and(|s| s.symmetric),
             };
-            Some(pose_uncertainty(&input, &settings.pose_search))
+            Some(pose_uncertainty(&input, &settings.pose_search)?)
         }
     };
     // The output map, at the poses the photo cannot tell from the found one.
@@ -218,6 +218,15 @@ pub fn estimate_with(
         }
     };
     let (axes, starts, chosen_start) = searched.map(PoseSearch::into_accounts).unwrap_or_default();
+    let (decisions, warnings) = decisions::decisions(
+        &decisions::Choices {
+            rival: judged.rival.as_ref(),
+            blur: blur_choice.as_ref(),
+            clipped_lights: &clipped_lights,
+            pose_uncertainty: pose_uncertainty.as_ref(),
+        },
+        settings,
+    );
     let report = Report {
         settings: settings.clone(),
         bsdf: Bsdf::<f32>::name(bsdf),
@@ -245,6 +254,8 @@ pub fn estimate_with(
             .iter()
             .map(|(pose, share)| (PoseRecord::from(pose), *share))
             .collect(),
+        decisions,
+        warnings,
         objective: report::ObjectiveReport::new(&settings.objective, terms.is_exact()),
         phases: phases.phases,
         psnr_db: final_psnr,

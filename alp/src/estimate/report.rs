@@ -8,6 +8,7 @@ use render::pose::Pose;
 use serde::Serialize;
 
 use super::blur::{BlurChoice, BlurEstimate};
+use super::decisions::Decision;
 use super::lighting::ClippedLight;
 use super::pose::uncertainty::PoseUncertainty;
 
@@ -117,6 +118,11 @@ pub struct Report {
     /// axes of its uncertainty that move the probe in the image by
     /// `LightingSettings::pose_draw_from_px` or more.
     pub final_poses: Vec<(PoseRecord, f64)>,
+    /// Every discrete choice the photo made, with its margin and noise.
+    pub decisions: Vec<Decision>,
+    /// The choices the photo did not settle, and the parts of the pose it
+    /// tells poorly, in words (`alp estimate` prints them).
+    pub warnings: Vec<String>,
     /// The objective's terms by phase.
     pub objective: ObjectiveReport,
     /// Every phase, in order.

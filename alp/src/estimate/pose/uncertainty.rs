@@ -29,13 +29,14 @@ use std::collections::BTreeMap;
 use glam::Vec2;
 use render::accel::Accel;
 use render::camera::Camera;
-use render::image_io::Mask;
 use render::integrator::{RenderSettings, coverage_mask};
 use render::pose::Pose;
 use render::probe::ProbeAsset;
 use serde::Serialize;
 
+use crate::error::Result;
 use crate::estimate::outline::{outline_points, signed_distance, signed_distance_at};
+use crate::estimate::photo::Photo;
 use crate::estimate::report::LineSearchReport;
 use crate::estimate::settings::PoseSearchSettings;
 use crate::linalg::{cholesky, cholesky_solve, symmetric_eigen};
@@ -128,24 +129,27 @@ pub(in crate::estimate) struct PartSearch<'a> {
 }
 
 /// What the pose's uncertainty is read from: the probe, the pose, the
-/// photo's sharp camera and its mask (the working image's), and the
-/// photo-scored searches made about the pose.
+/// photo (the working image) and the photo-scored searches made about
+/// the pose.
 pub(in crate::estimate) struct UncertaintyInput<'a> {
     pub(in crate::estimate) asset: &'a ProbeAsset,
     pub(in crate::estimate) pose: &'a Pose,
-    pub(in crate::estimate) camera: &'a Camera,
-    pub(in crate::estimate) mask: &'a Mask,
+    pub(in crate::estimate) photo: &'a Photo,
     pub(in crate::estimate) searches: Vec<PartSearch<'a>>,
+    /// Whether the probe looks the same at every turn about its axis: its
+    /// turn is then no part of its pose.
+    pub(in crate::estimate) alike_turned: bool,
 }
 
 /// The pose's uncertainty (see the module's description).
 pub(in crate::estimate) fn pose_uncertainty(
     input: &UncertaintyInput,
     settings: &PoseSearchSettings,
-) -> PoseUncertainty {
+) -> Result<PoseUncertainty> {
+    let camera = input.photo.camera.with_footprint(0.0)?;
     let (lo, hi) = input.asset.mesh.bounds();
-    let frame = PoseFrame::new(input.camera, input.pose, 0.5 * (lo + hi), glam::Vec3::Y);
-    let outline = outline_evidence(input, &frame, settings.uncertainty_points);
+    let frame = PoseFrame::new(&camera, input.pose, 0.5 * (lo + hi), glam::Vec3::Y);
+    let outline = outline_evidence(input, &camera, &frame, settings.uncertainty_points)?;
     let (mut information, rms, correlation) = outline.information();
     let mut photo_sigma = BTreeMap::new();
     for PartSearch { part, search } in &input.searches {
@@ -155,6 +159,9 @@ pub(in crate::estimate) fn pose_uncertainty(
             photo_sigma.insert(PART_NAMES[*part], 1.0 / told.sqrt());
         }
     }
+    if input.alike_turned {
+        (0..6).for_each(|k| (information[5][k], information[k][5]) = (0.0, 0.0));
+    }
     let (covariance, told) = covariance_of(information, settings.uncertainty_scale);
     let sigma = (0..6)
         .map(|k| (PART_NAMES[k], told[k].then(|| covariance[k][k].sqrt())))
@@ -163,7 +170,7 @@ pub(in crate::estimate) fn pose_uncertainty(
         .filter(|&k| told[k])
         .map(|k| (PART_NAMES[k], covariance[k][k].sqrt() * outline.motion[k]))
         .collect();
-    PoseUncertainty {
+    Ok(PoseUncertainty {
         sigma,
         sigma_px,
         motion: outline.motion,
@@ -172,7 +179,7 @@ pub(in crate::estimate) fn pose_uncertainty(
         outline_correlation_px: correlation,
         outline_points: outline.residual.len(),
         photo_sigma,
-    }
+    })
 }
 
 /// Largest deviation reported (degrees for a turn): beyond it the part is untold.
@@ -241,11 +248,16 @@ const STEP: f64 = 0.05;
 
 /// The found outline against the photo's mask, at most `max_points` points
 /// spread along it.
-fn outline_evidence(input: &UncertaintyInput, frame: &PoseFrame, max_points: usize) -> OutlineEvidence {
-    let camera = input.camera;
+fn outline_evidence(
+    input: &UncertaintyInput,
+    camera: &Camera,
+    frame: &PoseFrame,
+    max_points: usize,
+) -> Result<OutlineEvidence> {
     let found = coverage_mask(input.asset, input.pose, camera, &RenderSettings { spp: 4, seed: 0 });
-    let mask_distance = signed_distance(input.mask);
-    let (w, h) = (input.mask.width, input.mask.height);
+    let mask = &input.photo.mask;
+    let mask_distance = signed_distance(mask);
+    let (w, h) = (mask.width, mask.height);
     let points = outline_points(&found);
     let every = points.len().div_ceil(max_points.max(1)).max(1);
     let accel = Accel::new(&input.asset.mesh);
@@ -309,7 +321,7 @@ fn outline_evidence(input: &UncertaintyInput, frame: &PoseFrame, max_points: usi
         evidence.jacobian.push(rates.map(|r| normal.dot(r) as f64));
         evidence.residual.push(residual);
     }
-    evidence
+    Ok(evidence)
 }
 
 impl OutlineEvidence {
@@ -322,15 +334,19 @@ impl OutlineEvidence {
         }
         let mean_square = self.residual.iter().map(|r| r * r).sum::<f64>() / n as f64;
         let correlation = self.correlation_length(mean_square);
-        // The errors' covariance: correlated along the outline, plus rounding.
+        // The errors' correlation along the outline.
         let distance = |i: usize, j: usize| self.points[i].distance(self.points[j]) as f64;
-        let mut c = vec![0.0; n * n];
-        for i in 0..n {
-            for j in 0..n {
-                c[i * n + j] = mean_square * (-distance(i, j) / correlation.max(1e-6)).exp();
-            }
-            c[i * n + i] += ROUNDING_PX2;
-        }
+        let kernel: Vec<f64> = (0..n * n)
+            .map(|k| (-distance(k / n, k % n) / correlation.max(1e-6)).exp())
+            .collect();
+        // The fit took up the part of the mask's error that moves the pose
+        // (a mask traced a pixel wide all round is a probe nearer the
+        // camera, and leaves no residual): the residuals' mean square is
+        // the errors' variance times tr((I - H) K) / n, H the fit's hat.
+        let variance = mean_square * n as f64 / (n as f64 - self.fitted_share(&kernel)).max(1.0);
+        // The errors' covariance: correlated along the outline, plus rounding.
+        let mut c: Vec<f64> = kernel.iter().map(|k| variance * k).collect();
+        (0..n).for_each(|i| c[i * n + i] += ROUNDING_PX2);
         let Some(l) = cholesky(&c, n) else {
             return ([[0.0; 6]; 6], mean_square.sqrt(), correlation);
         };
@@ -340,6 +356,36 @@ impl OutlineEvidence {
         let information =
             std::array::from_fn(|a| std::array::from_fn(|b| (0..n).map(|i| columns[a][i] * solved[b][i]).sum()));
         (information, mean_square.sqrt(), correlation)
+    }
+
+    /// `tr(H K)`: how much of errors correlated as `kernel` (n x n, unit
+    /// variance) a least-squares fit of the pose to the outline takes up,
+    /// `H = J (J^T J)^+ J^T` over the directions the outline tells.
+    fn fitted_share(&self, kernel: &[f64]) -> f64 {
+        let n = self.residual.len();
+        let jtj: [[f64; 6]; 6] =
+            std::array::from_fn(|a| std::array::from_fn(|b| self.jacobian.iter().map(|j| j[a] * j[b]).sum()));
+        let jtkj: [[f64; 6]; 6] = std::array::from_fn(|a| {
+            std::array::from_fn(|b| {
+                (0..n)
+                    .map(|i| self.jacobian[i][a] * (0..n).map(|k| kernel[i * n + k] * self.jacobian[k][b]).sum::<f64>())
+                    .sum()
+            })
+        });
+        let (values, vectors) = symmetric_eigen(jtj);
+        let largest = values.iter().copied().fold(0.0, f64::max);
+        // tr((J^T J)^+ J^T K J) over the eigenvectors of J^T J.
+        (0..6)
+            .filter(|&k| values[k] > 1e-12 * largest && largest > 0.0)
+            .map(|k| {
+                let v = vectors[k];
+                let quadratic: f64 = (0..6)
+                    .flat_map(|a| (0..6).map(move |b| (a, b)))
+                    .map(|(a, b)| v[a] * jtkj[a][b] * v[b])
+                    .sum();
+                quadratic / values[k]
+            })
+            .sum()
     }
 
     /// The distance (pixels) over which the mask's error keeps its sign: at
@@ -418,20 +464,22 @@ mod tests {
     use crate::estimate::Settings;
     use crate::estimate::testing::can_in_the_courtyard;
     use glam::Vec3;
+    use render::image_io::Mask;
 
     #[test]
     fn a_mask_off_by_a_pixel_or_two_widens_the_pose_s_deviations_across_the_view() {
         let (asset, truth, photo) = can_in_the_courtyard(240, 180, Vec3::new(0.0, 0.12, 0.32));
         let settings = Settings::default().pose_search;
         let at = |mask: &Mask| {
+            let photo = photo.clone().with_mask(mask.clone()).expect("a photo");
             let input = UncertaintyInput {
                 asset: &asset,
                 pose: &truth,
-                camera: &photo.camera,
-                mask,
+                photo: &photo,
                 searches: Vec::new(),
+                alike_turned: false,
             };
-            pose_uncertainty(&input, &settings)
+            pose_uncertainty(&input, &settings).expect("an uncertainty")
         };
         // The mask moved right by 2 px: a fit would move the pose so far;
         // one deviation of the model (errors correlated along a stretch of
