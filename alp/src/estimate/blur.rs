@@ -375,8 +375,63 @@ mod tests {
     use super::*;
     use crate::estimate::settings::Settings;
     use crate::estimate::testing::can_in_the_courtyard;
+    use crate::estimate::testing::{photo_of, probe_of};
     use crate::study::perturb::blurred;
-    use glam::Vec3;
+    use glam::{Quat, Vec3};
+    use render::camera::Camera;
+    use render::envmap::EnvMap;
+    use render::pose::Pose;
+
+    #[test]
+    fn the_photo_keeps_a_blur_only_where_there_is_one_even_when_its_edges_read_soft() {
+        // The can under the studio's large bright panels, whose reflections
+        // make its sharp photo's edges read soft.
+        let asset = render::procedural::SodaCan::default().build();
+        let truth = Pose::new(Quat::from_rotation_y(0.3), 1.0, Vec3::ZERO);
+        let camera = Camera::new(
+            240,
+            180,
+            40.0,
+            Vec3::new(0.0, 0.12, 0.32),
+            Vec3::new(0.0, 0.06, 0.0),
+            Vec3::Y,
+        )
+        .expect("camera");
+        let env_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
+        let env = EnvMap::read(env_path).expect("bundled env map").downsample(32);
+        let sharp = photo_of(&asset, &truth, camera, &env, 16);
+        let probe = probe_of(&asset);
+        let settings = Settings::default();
+        let work = (64, 32);
+        let clipped = vec![false; sharp.camera.pixel_count()];
+        // The map the check starts from: the lighting at the pose, without blur.
+        let map: Vec<f64> = env
+            .downsample(work.1)
+            .radiance()
+            .iter()
+            .flat_map(|t| t.map(|v| v as f64))
+            .collect();
+        let choose = |photo: &Photo, reading: f32| {
+            let input = BlurTestInput {
+                probe: &probe,
+                photo,
+                factor: 1.0,
+                clipped: &clipped,
+                pose: &truth,
+                map: &map,
+                work,
+            };
+            blur_by_photo(&input, reading, &settings).expect("a choice")
+        };
+        // Read 1.5 px soft, the sharp photo keeps none.
+        let choice = choose(&sharp, 1.5);
+        assert_eq!(choice.blur_px, 0.0, "{choice:?}");
+        // Blurred by 1.5 px, it keeps the blur.
+        let soft = blurred(&sharp, 1.5).expect("blurred");
+        let choice = choose(&soft, 1.5);
+        assert_eq!(choice.blur_px, 1.5, "{choice:?}");
+        assert!(choice.margin_se >= settings.photo.blur.test_margin_se);
+    }
 
     #[test]
     fn a_blurred_photo_s_blur_is_found_on_the_probe_s_edges_and_a_sharp_one_s_is_none() {
