@@ -56,6 +56,18 @@ def found(rec):
     return rec["translation_mm"] < rec["diameter_mm"] / 20.0
 
 
+def observable(rec, part):
+    """Whether a photo can tell the pose's part at all, so that its error is one: a sphere's rotation and a
+    symmetric probe's turn are not; a probe alike end for end found the other way up has its parts measured
+    against the wrong end."""
+    o = rec["orientation"]
+    if part.endswith("_mm") or o == "full":
+        return True
+    if o == "none" or part == "turn_deg":
+        return False
+    return o == "axis" or rec["axis_deg"] <= 90.0
+
+
 def run_scene(args, split, scene_dir, cache):
     with open(os.path.join(scene_dir, "scene.json")) as f:
         meta = json.load(f)
@@ -167,7 +179,8 @@ def summary(records, cmdline):
     if covered:
         lines += ["", "## The pose's uncertainty", "",
                   "How often the found pose's error lies within two of its reported deviations (alp eval's "
-                  "pose_parts against report.json's pose_uncertainty), per part over the photos that tell it, and "
+                  "pose_parts against report.json's pose_uncertainty), per part over the photos that tell it (and "
+                  "where the part is observable: no sphere's rotation, no symmetric probe's turn), and "
                   "over every part told at once; the median deviation; photos with a warning.", "",
                   "| split | " + " | ".join(PARTS) + " | all parts | photos warned |",
                   "|---|" + "---|" * (len(PARTS) + 2)]
@@ -176,12 +189,13 @@ def summary(records, cmdline):
             if not rs:
                 continue
             within = lambda r, p: abs(r["pose_parts"][p]) <= 2.0 * r["pose_sigma"][p]
+            told_by = lambda r, p: r["pose_sigma"].get(p) is not None and observable(r, p)
             cells = []
             for p in PARTS:
-                told = [r for r in rs if r["pose_sigma"].get(p) is not None]
+                told = [r for r in rs if told_by(r, p)]
                 cells.append("%.0f %% of %d (%s)" % (100.0 * sum(within(r, p) for r in told) / max(len(told), 1),
                                                    len(told), es.fmt(es.median([r["pose_sigma"][p] for r in told]))))
-            every = sum(all(within(r, p) for p in PARTS if r["pose_sigma"].get(p) is not None) for r in rs)
+            every = sum(all(within(r, p) for p in PARTS if told_by(r, p)) for r in rs)
             lines.append("| %s | %s | %.0f %% of %d | %d |" % (s, " | ".join(cells), 100.0 * every / len(rs), len(rs),
                                                           sum(bool(r.get("warnings")) for r in by[s])))
     failed = [r for r in records if not r["success"]]

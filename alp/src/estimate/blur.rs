@@ -12,7 +12,7 @@
 //!
 //! A reading is a guess until the photo checks it: a mirror's limb, or one
 //! reflecting large bright panels, reads soft on a sharp photo. So the
-//! output map's blur is the photo's choice ([`blur_by_photo`]): at the
+//! output map's blur is the photo's choice (`blur_by_photo`): at the
 //! found pose the lighting is fitted on half the probe's pixels (a
 //! checkerboard) under each candidate blur -- none, and the reading --
 //! and judged on the other half, the probe's own rendered edges (its
@@ -82,7 +82,7 @@ pub struct BlurCandidate {
     pub held_out_error: f64,
 }
 
-/// The photo's choice of blur at the found pose ([`blur_by_photo`]).
+/// The photo's choice of blur at the found pose (`blur_by_photo`).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BlurChoice {
     /// Every blur fitted, none first.

@@ -164,7 +164,6 @@ pub fn estimate_with(
                 asset,
                 pose: &judged.pose,
                 photo,
-                searches: judged.part_searches(),
                 alike_turned: probe.alike_turned == Some(true) || searched.as_ref().is_some_and(|s| s.symmetric),
             };
             Some(pose_uncertainty(&input, &settings.pose_search)?)

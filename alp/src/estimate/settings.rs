@@ -455,11 +455,10 @@ pub struct PoseSearchSettings {
     /// Outline points at most that the pose's uncertainty compares
     /// (`pose::uncertainty`): its cost grows as their cube.
     pub uncertainty_points: usize,
-    /// A photo-scored search's noise (dB): the pose's uncertainty along
-    /// a part it searched is how far the score falls by this much.
-    pub uncertainty_noise_db: f64,
-    /// Factor on the pose's deviations, set on the train split so that two
-    /// of them cover the true pose's error on most photos.
+    /// Factor on the pose's deviations, set on the train split (traced
+    /// masks) so that two of them cover the found pose's error on 80 % of
+    /// photos: the outline's errors are taken as a Gaussian process, which
+    /// a tracer's are not quite (results 21).
     pub uncertainty_scale: f64,
 }
 
@@ -624,8 +623,7 @@ impl Default for Settings {
                 size_step_px: 0.0,
                 size_reach_px: 2.0,
                 uncertainty_points: 256,
-                uncertainty_noise_db: 0.1,
-                uncertainty_scale: 1.0,
+                uncertainty_scale: 3.0,
             },
             pose_method: PoseMethodName::OutlineThenPhoto,
             joint: JointSettings {

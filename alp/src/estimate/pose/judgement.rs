@@ -15,7 +15,6 @@ use render::pose::Pose;
 use render::sampling::EnvSampler;
 
 use super::hypotheses;
-use super::uncertainty::PartSearch;
 use crate::error::Result;
 use crate::estimate::Probe;
 use crate::estimate::lighting::{
@@ -84,35 +83,6 @@ pub(in crate::estimate) struct Judged {
     pub(in crate::estimate) size: Option<LineSearchReport>,
     pub(in crate::estimate) lean: Option<LineSearchReport>,
     pub(in crate::estimate) refinement: Vec<RefinementStep>,
-}
-
-impl Judged {
-    /// The photo-scored line searches about the kept pose, by the part of
-    /// the pose each moved ([`crate::pose_frame::PART_NAMES`]): the lean
-    /// search, and the last search of each direction of the kept pose's
-    /// refinement (a sway turns the axis within the image, against the
-    /// frame's sense: the curvature is alike).
-    pub(in crate::estimate) fn part_searches(&self) -> Vec<PartSearch<'_>> {
-        let kept = match self.rival.as_ref().is_some_and(|r| r.kept_rival) {
-            true => "rival",
-            false => "chosen",
-        };
-        let mut searches: Vec<PartSearch> = [("sway", 3), ("lean", 4), ("turn", 5)]
-            .into_iter()
-            .filter(|&(_, part)| part != 4 || self.lean.is_none())
-            .filter_map(|(direction, part)| {
-                let step = (self.refinement.iter().rev()).find(|s| s.candidate == kept && s.direction == direction)?;
-                Some(PartSearch {
-                    part,
-                    search: &step.search,
-                })
-            })
-            .collect();
-        if let Some(lean) = &self.lean {
-            searches.push(PartSearch { part: 4, search: lean });
-        }
-        searches
-    }
 }
 
 /// The pose kept so far: its pilot map (solved at `piloted`, which the

@@ -12,13 +12,13 @@
 //!   along its normal by `J dp` when the pose moves by `dp` (`J` from the
 //!   contour's points projected at poses moved by each part), and the
 //!   outline tells the pose with information `J^T C^-1 J`.
-//! - **The photo.** What the outline tells least (the lean, a turn about
-//!   the axis) the photo-scored line searches measured: the score's
-//!   curvature at the kept pose, over the score's noise
-//!   (`PoseSearchSettings::uncertainty_noise_db`), is the information the
-//!   photo adds along that part.
 //!
-//! Their sum's inverse is the covariance; a part that neither tells (the
+//! The photo-scored line searches' curvature (the lean search's score
+//! against the lean) is no part of it: on train's traced masks it was
+//! eight times narrower than the lean's error (the score peaks where the
+//! lean makes up for the other parts' errors, not at the truth).
+//!
+//! Its inverse is the covariance; a part that neither tells (the
 //! turn of a probe alike at every turn) has no deviation. The deviations
 //! are scaled by `PoseSearchSettings::uncertainty_scale`, set on the train
 //! split so that two of them cover the true pose's error as often as a
@@ -37,7 +37,6 @@ use serde::Serialize;
 use crate::error::Result;
 use crate::estimate::outline::{outline_points, signed_distance, signed_distance_at};
 use crate::estimate::photo::Photo;
-use crate::estimate::report::LineSearchReport;
 use crate::estimate::settings::PoseSearchSettings;
 use crate::linalg::{cholesky, cholesky_solve, symmetric_eigen};
 use crate::pose_frame::{PART_NAMES, PoseFrame, PoseParts};
@@ -61,9 +60,6 @@ pub struct PoseUncertainty {
     pub outline_correlation_px: f64,
     /// The outline points compared.
     pub outline_points: usize,
-    /// Per part the photo's line searches measured, the deviation they
-    /// alone give (the score falling by its noise).
-    pub photo_sigma: BTreeMap<&'static str, f64>,
     /// Per told part, how far one deviation moves the probe's surface in
     /// the image (root mean square over its pixels, working pixels).
     pub sigma_px: BTreeMap<&'static str, f64>,
@@ -121,21 +117,12 @@ impl PoseUncertainty {
     }
 }
 
-/// A line search's account over one part of the pose, in that part's units.
-pub(in crate::estimate) struct PartSearch<'a> {
-    /// Which part ([`PART_NAMES`]'s index).
-    pub(in crate::estimate) part: usize,
-    pub(in crate::estimate) search: &'a LineSearchReport,
-}
-
-/// What the pose's uncertainty is read from: the probe, the pose, the
-/// photo (the working image) and the photo-scored searches made about
-/// the pose.
+/// What the pose's uncertainty is read from: the probe, the pose and the
+/// photo (the working image).
 pub(in crate::estimate) struct UncertaintyInput<'a> {
     pub(in crate::estimate) asset: &'a ProbeAsset,
     pub(in crate::estimate) pose: &'a Pose,
     pub(in crate::estimate) photo: &'a Photo,
-    pub(in crate::estimate) searches: Vec<PartSearch<'a>>,
     /// Whether the probe looks the same at every turn about its axis: its
     /// turn is then no part of its pose.
     pub(in crate::estimate) alike_turned: bool,
@@ -151,14 +138,6 @@ pub(in crate::estimate) fn pose_uncertainty(
     let frame = PoseFrame::new(&camera, input.pose, 0.5 * (lo + hi), glam::Vec3::Y);
     let outline = outline_evidence(input, &camera, &frame, settings.uncertainty_points)?;
     let (mut information, rms, correlation) = outline.information();
-    let mut photo_sigma = BTreeMap::new();
-    for PartSearch { part, search } in &input.searches {
-        if let Some(curvature) = score_curvature(search) {
-            let told = curvature / settings.uncertainty_noise_db;
-            information[*part][*part] += told;
-            photo_sigma.insert(PART_NAMES[*part], 1.0 / told.sqrt());
-        }
-    }
     if input.alike_turned {
         (0..6).for_each(|k| (information[5][k], information[k][5]) = (0.0, 0.0));
     }
@@ -178,7 +157,6 @@ pub(in crate::estimate) fn pose_uncertainty(
         outline_rms_px: rms,
         outline_correlation_px: correlation,
         outline_points: outline.residual.len(),
-        photo_sigma,
     })
 }
 
@@ -425,39 +403,6 @@ impl OutlineEvidence {
     }
 }
 
-/// The curvature (score per unit squared, positive at a maximum) of a
-/// quadratic fitted by least squares to a line search's finite scores;
-/// None without three distinct values or at no maximum.
-fn score_curvature(search: &LineSearchReport) -> Option<f64> {
-    let tried: Vec<(f64, f64)> = (search.tried.iter())
-        .filter(|(_, s)| s.is_finite())
-        .map(|&(x, s)| ((x - search.kept) as f64, s))
-        .collect();
-    let mut distinct: Vec<f64> = tried.iter().map(|t| t.0).collect();
-    distinct.sort_by(f64::total_cmp);
-    distinct.dedup();
-    if distinct.len() < 3 {
-        return None;
-    }
-    // Normal equations of s = a + b x + c x^2.
-    let mut m = [[0.0; 3]; 3];
-    let mut v = [0.0; 3];
-    for &(x, s) in &tried {
-        let basis = [1.0, x, x * x];
-        for i in 0..3 {
-            v[i] += basis[i] * s;
-            for j in 0..3 {
-                m[i][j] += basis[i] * basis[j];
-            }
-        }
-    }
-    let flat: Vec<f64> = m.iter().flatten().copied().collect();
-    let l = cholesky(&flat, 3)?;
-    let c = cholesky_solve(&l, 3, &v)[2];
-    let level = tried.iter().map(|t| t.1.abs()).sum::<f64>() / tried.len() as f64;
-    (c < -1e-9 * level.max(1e-300)).then_some(-2.0 * c)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -469,14 +414,17 @@ mod tests {
     #[test]
     fn a_mask_off_by_a_pixel_or_two_widens_the_pose_s_deviations_across_the_view() {
         let (asset, truth, photo) = can_in_the_courtyard(240, 180, Vec3::new(0.0, 0.12, 0.32));
-        let settings = Settings::default().pose_search;
+        // The model's own deviations, not the factor set on train.
+        let settings = PoseSearchSettings {
+            uncertainty_scale: 1.0,
+            ..Settings::default().pose_search
+        };
         let at = |mask: &Mask| {
             let photo = photo.clone().with_mask(mask.clone()).expect("a photo");
             let input = UncertaintyInput {
                 asset: &asset,
                 pose: &truth,
                 photo: &photo,
-                searches: Vec::new(),
                 alike_turned: false,
             };
             pose_uncertainty(&input, &settings).expect("an uncertainty")
@@ -517,24 +465,6 @@ mod tests {
         // The exact mask's doubt moves the probe less than the threshold: the pose alone.
         let alone = exact.draws(&truth, &photo.camera, 0.5 * (lo + hi), 1, 0.5);
         assert_eq!(alone.len(), 1, "{exact:?}");
-    }
-
-    #[test]
-    fn a_line_search_s_curvature_is_its_parabola_s() {
-        let search = LineSearchReport {
-            tried: [0.0f32, -0.3, 0.3, 0.6, 1.2]
-                .map(|x| (x, 5.0 - 2.0 * (x as f64 - 0.1).powi(2)))
-                .to_vec(),
-            kept: 0.0,
-        };
-        let c = score_curvature(&search).expect("a maximum");
-        assert!((c - 4.0).abs() < 1e-9, "{c}");
-        // A flat or rising score tells nothing.
-        let flat = LineSearchReport {
-            tried: vec![(0.0, 1.0), (-0.3, 1.0), (0.3, 1.0)],
-            kept: 0.0,
-        };
-        assert!(score_curvature(&flat).is_none());
     }
 
     #[test]
