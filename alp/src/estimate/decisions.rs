@@ -109,11 +109,15 @@ pub(super) fn decisions(choices: &Choices, settings: &Settings) -> (Vec<Decision
         ));
     }
     if let Some(uncertainty) = choices.pose_uncertainty {
+        let carried = match settings.lighting.pose_draw_axes {
+            0 => "the map is solved at the found pose and may be warped where it is off",
+            _ => "the map is solved over the poses it cannot tell apart",
+        };
         for (part, px) in &uncertainty.sigma_px {
             if *px >= WARN_SIGMA_PX {
                 warnings.push(format!(
                     "pose: the photo tells its {part} only to {:.2} (one deviation moves the probe {px:.1} px): \
-                     the map is solved over the poses it cannot tell apart",
+                     {carried}",
                     uncertainty.sigma[part].unwrap_or(f64::NAN)
                 ));
             }
