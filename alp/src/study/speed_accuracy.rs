@@ -9,12 +9,13 @@ use crate::estimate::{Quality, Settings};
 use super::{Apply, Method, Variant};
 
 /// The knob families, in the order swept and charted.
-pub const FAMILIES: [&str; 9] = [
+pub const FAMILIES: [&str; 10] = [
     "quality",
     "spp",
     "starts",
     "map",
     "model",
+    "pose-draws",
     "lighting",
     "threads",
     "true-pose",
@@ -28,7 +29,7 @@ pub const APART: [&str; 2] = ["true-pose", "mitsuba"];
 
 /// The families of modelling choices, tabled per probe family beside the
 /// default (`model.md`): what each buys on which probe.
-pub const MODELLING: [&str; 2] = ["map", "model"];
+pub const MODELLING: [&str; 3] = ["map", "model", "pose-draws"];
 
 /// Adam iterations of the outside method's settings.
 pub const MITSUBA_ITERS: [usize; 2] = [200, 1000];
@@ -38,7 +39,9 @@ pub const MITSUBA_ITERS: [usize; 2] = [200, 1000];
 /// halved and doubled or more; 1 to 12 orientation starts; fixed working
 /// map resolutions against the automatic one; the light transport without
 /// one bounce of inter-reflection, without the probe's shadows on itself,
-/// and with BRDF samples alone instead of MIS; the paper's Adam lighting
+/// and with BRDF samples alone instead of MIS; the output map solved over
+/// poses drawn within the pose's uncertainty (`K` = 3 or 5 poses, and 3 at
+/// twice the spread) instead of the found pose alone; the paper's Adam lighting
 /// solve; 1 and 2 threads (the default runs at the study's `threads`); the
 /// lighting alone at the true pose (`true-pose`); and the outside method,
 /// Mitsuba 3 fitting the map by Adam at the true pose (`mitsuba`).
@@ -96,6 +99,18 @@ pub fn family(name: &str, threads: usize) -> Result<Vec<Variant>> {
                 without("no_shadows", |m| m.shadows = false),
                 without("bsdf_only", |m| m.mis = false),
             ]
+        }
+        "pose-draws" => {
+            let draws = |axes: usize, spread: f64| {
+                ours(
+                    format!("pose_draws={}x{spread}", 1 + 2 * axes),
+                    Box::new(move |s, _| {
+                        s.lighting.pose_draw_axes = axes;
+                        s.pose_search.uncertainty_scale *= spread;
+                    }),
+                )
+            };
+            vec![draws(1, 1.0), draws(2, 1.0), draws(1, 2.0)]
         }
         "lighting" => vec![ours(
             "lighting=adam".into(),
