@@ -1,5 +1,6 @@
 //! Every discrete choice the photo made, with the margin it won by: the
-//! chosen pose against its rival (another end, a half turn), the blur, each
+//! chosen pose against its rival (another end, a half turn, where the
+//! probe's symmetry does not make them alike), the blur, each
 //! light brighter than the sensor. A choice won by less than its noise is
 //! a guess the photo could not settle: it goes into `report.json`'s
 //! `warnings`, which `alp estimate` prints.
@@ -55,10 +56,20 @@ const WARN_SIGMA_PX: f64 = 1.0;
 /// [`WARN_SIGMA_PX`]).
 pub(super) fn decisions(choices: &Choices, settings: &Settings) -> (Vec<Decision>, Vec<String>) {
     let mut decisions = Vec::new();
-    if let Some(rival) = choices.rival {
-        let (chosen, margin) = match rival.kept_rival {
+    // The choice is against the rivals the probe's own symmetry does not
+    // make alike: the kept pose (the searched one, or the rival if it won
+    // and is no twin of it) against the best of them.
+    if let Some((rival, distinct_db)) = choices.rival.and_then(|r| r.distinct_db.map(|d| (r, d))) {
+        let (chosen, margin) = match rival.kept_rival && !rival.alike {
             true => ("rival", rival.rival_db - rival.chosen_db),
-            false => ("searched", rival.chosen_db - rival.rival_db),
+            false => {
+                let kept_db = if rival.kept_rival {
+                    rival.rival_db
+                } else {
+                    rival.chosen_db
+                };
+                ("searched", kept_db - distinct_db)
+            }
         };
         decisions.push(Decision {
             name: "rival",
@@ -148,11 +159,13 @@ mod tests {
     #[test]
     fn a_choice_won_within_its_noise_is_a_warning() {
         let settings = Settings::default();
-        let rival = |chosen_db, rival_db, kept_rival| RivalReport {
+        let rival = |chosen_db, rival_db: f64, kept_rival| RivalReport {
             rival_axis: [0.0, 1.0, 0.0],
             chosen_db,
             rival_db,
             kept_rival,
+            alike: false,
+            distinct_db: Some(rival_db),
         };
         let at = |r: &RivalReport| {
             decisions(
@@ -177,5 +190,23 @@ mod tests {
         // A rival that could not be scored is no doubt.
         let (d, w) = at(&rival(12.0, f64::NEG_INFINITY, false));
         assert!(d[0].decided() && w.is_empty());
+        // Nor is one the probe's symmetry makes alike (a ring's other end).
+        let alike = RivalReport {
+            alike: true,
+            distinct_db: None,
+            ..rival(12.0, 12.1, false)
+        };
+        let (d, w) = at(&alike);
+        assert!(d.is_empty() && w.is_empty(), "{d:?} {w:?}");
+        // A twin (a cap's half turn) kept by 0.4 dB, the other end 1.5 dB
+        // behind the searched pose: the choice is against the other end.
+        let twin = RivalReport {
+            alike: true,
+            distinct_db: Some(10.5),
+            ..rival(12.0, 12.4, true)
+        };
+        let (d, w) = at(&twin);
+        assert_eq!(d[0].chosen, "searched");
+        assert!((d[0].margin - 1.9).abs() < 1e-9 && w.is_empty(), "{d:?}");
     }
 }

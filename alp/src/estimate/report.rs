@@ -309,6 +309,15 @@ pub struct RivalReport {
     pub rival_db: f64,
     /// Whether the rival scored higher by `Settings::search_margin_db`, and was kept.
     pub kept_rival: bool,
+    /// Whether this rival differs from the chosen pose by a turn that maps
+    /// the probe on to itself (a ring's other end, any turn of a ball of
+    /// one metal, a cap's half turn where its grooves come back): both
+    /// render the same photo, and the test only picks the better polished
+    /// of two fits.
+    pub alike: bool,
+    /// The best score (dB) of the rivals that are not alike, the ones a
+    /// choice was made against (null when every rival is alike).
+    pub distinct_db: Option<f64>,
 }
 
 /// A line search's account over one parameter of the pose (the lean's

@@ -23,6 +23,7 @@ use crate::estimate::lighting::{
 use crate::estimate::photo::{Photo, Pixels};
 use crate::estimate::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
 use crate::estimate::settings::Settings;
+use crate::estimate::symmetry::maps_on_to_itself;
 
 /// The lean (degrees) that maximises `score` within `reach` either way,
 /// by a line search: leans of 0 and of `step` either way; while one side
@@ -337,8 +338,16 @@ impl PhotoJudge<'_> {
         // was); the best-scored one is the test's. A rival the photo
         // cannot show (out of the view, no data pixel) is no rival.
         let db = |scored: &ScoredRival| scored.as_ref().map_or(f64::NEG_INFINITY, |((db, _), _)| *db);
+        // A rival that differs from the chosen pose by a turn mapping the
+        // probe on to itself renders the same photo: no choice to judge.
+        let alike = |rival: &Pose| {
+            let turn = kept.pose.rotation.inverse() * rival.rotation;
+            maps_on_to_itself(self.probe.asset, turn, &self.settings.symmetry)
+        };
         let mut strongest = None;
+        let mut distinct_db: Option<f64> = None;
         for rival_piloted in rivals {
+            let rival_alike = alike(&rival_piloted);
             let mut rival = rival_piloted;
             let rival_scored = self.pilot(&rival, phases).and_then(|rival_map| {
                 let mut scored = score(&rival, &rival_map, phases)?;
@@ -348,20 +357,25 @@ impl PhotoJudge<'_> {
                 }
                 Ok((scored, rival_map))
             });
+            if !rival_alike {
+                distinct_db = Some(distinct_db.unwrap_or(f64::NEG_INFINITY).max(db(&rival_scored)));
+            }
             if strongest
                 .as_ref()
-                .is_none_or(|(_, _, best)| db(&rival_scored) > db(best))
+                .is_none_or(|(_, _, best, _)| db(&rival_scored) > db(best))
             {
-                strongest = Some((rival, rival_piloted, rival_scored));
+                strongest = Some((rival, rival_piloted, rival_scored, rival_alike));
             }
         }
-        let (rival, rival_piloted, rival_scored) = strongest.expect("at least one rival");
+        let (rival, rival_piloted, rival_scored, alike) = strongest.expect("at least one rival");
         let rival_db = db(&rival_scored);
         let report = RivalReport {
             rival_axis: (rival.rotation * Vec3::Y).to_array(),
             chosen_db: chosen.0,
             rival_db,
             kept_rival: rival_db > chosen.0 + self.settings.pose_search.search_margin_db,
+            alike,
+            distinct_db,
         };
         kept.scored = Some(match rival_scored {
             Ok((rival_score, rival_map)) if report.kept_rival => {
