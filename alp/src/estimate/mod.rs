@@ -165,6 +165,7 @@ pub fn estimate_with(
                 pose: &judged.pose,
                 photo,
                 alike_turned: probe.alike_turned == Some(true) || searched.as_ref().is_some_and(|s| s.symmetric),
+                symmetry: &settings.symmetry,
             };
             Some(pose_uncertainty(&input, &settings.pose_search)?)
         }

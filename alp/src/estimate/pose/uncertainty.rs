@@ -18,8 +18,9 @@
 //! eight times narrower than the lean's error (the score peaks where the
 //! lean makes up for the other parts' errors, not at the truth).
 //!
-//! Its inverse is the covariance; a part that neither tells (the
-//! turn of a probe alike at every turn) has no deviation. The deviations
+//! Its inverse is the covariance; a part the outline does not tell, or a
+//! turn that maps the probe on to itself (the turn of a probe alike at
+//! every turn, any turn of a ball of one metal), has no deviation. The deviations
 //! are scaled by `PoseSearchSettings::uncertainty_scale`, set on the train
 //! split so that two of them cover the true pose's error as often as a
 //! Gaussian's do.
@@ -37,7 +38,8 @@ use serde::Serialize;
 use crate::error::Result;
 use crate::estimate::outline::{outline_points, signed_distance, signed_distance_at};
 use crate::estimate::photo::Photo;
-use crate::estimate::settings::PoseSearchSettings;
+use crate::estimate::settings::{PoseSearchSettings, SymmetrySettings};
+use crate::estimate::symmetry::maps_on_to_itself;
 use crate::linalg::{cholesky, cholesky_solve, symmetric_eigen};
 use crate::pose_frame::{PART_NAMES, PoseFrame, PoseParts};
 
@@ -126,7 +128,14 @@ pub(in crate::estimate) struct UncertaintyInput<'a> {
     /// Whether the probe looks the same at every turn about its axis: its
     /// turn is then no part of its pose.
     pub(in crate::estimate) alike_turned: bool,
+    /// What tells a turn that maps the probe on to itself.
+    pub(in crate::estimate) symmetry: &'a SymmetrySettings,
 }
+
+/// The turn (degrees) by which a rotation part is tried for the probe's
+/// symmetry: no multiple of a grooved cap's groove period, far enough
+/// that a can's logo moves off itself.
+const ALIKE_TRIAL_DEG: f64 = 37.0;
 
 /// The pose's uncertainty (see the module's description).
 pub(in crate::estimate) fn pose_uncertainty(
@@ -138,8 +147,20 @@ pub(in crate::estimate) fn pose_uncertainty(
     let frame = PoseFrame::new(&camera, input.pose, 0.5 * (lo + hi), glam::Vec3::Y);
     let outline = outline_evidence(input, &camera, &frame, settings.uncertainty_points)?;
     let (mut information, rms, correlation) = outline.information();
-    if input.alike_turned {
-        (0..6).for_each(|k| (information[5][k], information[k][5]) = (0.0, 0.0));
+    // A turn that maps the probe on to itself (any turn of a ball of one
+    // metal, a smooth cap's about its axis) is no part of its pose.
+    let alike = |k: usize| {
+        let mut parts = [0.0; 6];
+        parts[k] = ALIKE_TRIAL_DEG;
+        let moved = frame.moved(input.pose, &PoseParts::from_array(parts));
+        maps_on_to_itself(
+            input.asset,
+            input.pose.rotation.inverse() * moved.rotation,
+            input.symmetry,
+        )
+    };
+    for k in (3..6).filter(|&k| (k == 5 && input.alike_turned) || alike(k)) {
+        (0..6).for_each(|j| (information[k][j], information[j][k]) = (0.0, 0.0));
     }
     let (covariance, told) = covariance_of(information, settings.uncertainty_scale);
     let sigma = (0..6)
@@ -419,6 +440,7 @@ mod tests {
             uncertainty_scale: 1.0,
             ..Settings::default().pose_search
         };
+        let symmetry = Settings::default().symmetry;
         let at = |mask: &Mask| {
             let photo = photo.clone().with_mask(mask.clone()).expect("a photo");
             let input = UncertaintyInput {
@@ -426,6 +448,7 @@ mod tests {
                 pose: &truth,
                 photo: &photo,
                 alike_turned: false,
+                symmetry: &symmetry,
             };
             pose_uncertainty(&input, &settings).expect("an uncertainty")
         };
@@ -465,6 +488,33 @@ mod tests {
         // The exact mask's doubt moves the probe less than the threshold: the pose alone.
         let alone = exact.draws(&truth, &photo.camera, 0.5 * (lo + hi), 1, 0.5);
         assert_eq!(alone.len(), 1, "{exact:?}");
+    }
+
+    #[test]
+    fn a_ball_of_one_metal_has_a_place_but_no_turn() {
+        // The can's camera, a ball where the can stood.
+        let (_, _, photo) = can_in_the_courtyard(160, 120, Vec3::new(0.0, 0.12, 0.32));
+        let ball = render::procedural::UvSphere {
+            radius: 0.03,
+            ..Default::default()
+        }
+        .build();
+        let at = Pose::new(glam::Quat::IDENTITY, 1.0, Vec3::new(0.0, 0.06, 0.0));
+        let env = render::envmap::EnvMap::new(8, 4, vec![[1.0, 0.9, 0.8]; 32]).expect("a map");
+        let photo = crate::estimate::testing::photo_of(&ball, &at, photo.camera, &env, 4);
+        let symmetry = Settings::default().symmetry;
+        let input = UncertaintyInput {
+            asset: &ball,
+            pose: &at,
+            photo: &photo,
+            alike_turned: false,
+            symmetry: &symmetry,
+        };
+        let u = pose_uncertainty(&input, &Settings::default().pose_search).expect("an uncertainty");
+        for part in ["in_view_deg", "lean_deg", "turn_deg"] {
+            assert_eq!(u.sigma[part], None, "{part}: {u:?}");
+        }
+        assert!(u.sigma["across_x_mm"].is_some_and(|s| s > 0.0), "{u:?}");
     }
 
     #[test]
