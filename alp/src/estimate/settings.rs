@@ -231,6 +231,17 @@ pub struct SymmetrySettings {
     /// Circles whose material varies may hold at most this share of the area
     /// of a probe that looks alike at every turn.
     pub varied_share: f64,
+    /// How far a turned facet's centre may land from another's (a share of
+    /// the probe's extent) and still be on the surface
+    /// (`symmetry::SelfMap`): a rival's polish leaves it a fraction of a
+    /// millimetre off the exact symmetry; wider takes a shallow recess for
+    /// the other end's flat.
+    pub self_map_reach: f64,
+    /// The share of turned facets that must land on the surface in the same
+    /// material for a turn to map the probe on to itself: a can's logo, about
+    /// 1.4 % of its surface by area, tells its half turn; higher takes a faceted
+    /// ball for no ball.
+    pub self_map_share: f64,
 }
 
 /// Axis hypotheses from the mask and the outline's look-alikes.
@@ -547,6 +558,8 @@ impl Default for Settings {
                 circle_min_samples: 4,
                 material_tolerance: 0.01,
                 varied_share: 0.01,
+                self_map_reach: 0.03,
+                self_map_share: 0.995,
             },
             hypotheses: HypothesisSettings {
                 same_axis_deg: 15.0,

@@ -4,7 +4,7 @@
 //! every turn (its surface of revolution and its material the same all
 //! round each circle about the axis).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use glam::{DMat3, DVec3, Quat, Vec2, Vec3};
 use render::mesh::Mesh;
@@ -81,72 +81,87 @@ pub(super) fn facets(mesh: &Mesh) -> Vec<(DVec3, DVec3, f64)> {
         .collect()
 }
 
-/// Facets at most whose centres [`maps_on_to_itself`] moves and looks up.
+/// Facets at most whose centres [`SelfMap::alike`] turns and looks up.
 const SELF_MAP_FACETS: usize = 2_000;
-/// How far (a share of the probe's extent) a moved facet's centre may land
-/// from another's and still be on the surface: a pose's polish leaves the
-/// rival a fraction of a millimetre off the exact symmetry, and a can's
-/// recessed top lies millimetres from where its bottom would.
-const SELF_MAP_REACH: f64 = 0.03;
-/// The share of moved facets that must land on the surface, in the same
-/// material, for the turn to map the probe on to itself: a can's logo,
-/// 1.4 % of its surface, tells its half turn.
-const SELF_MAP_SHARE: f64 = 0.995;
 
-/// Whether `turn` (mesh coordinates, about the centre of the probe's
-/// bounding box) maps the probe on to itself, shape and material, so that
+/// The probe's surface as facet centres and their materials, to ask of a
+/// turn (mesh coordinates, about the centre of the probe's bounding box)
+/// whether it maps the probe on to itself, shape and material, so that
 /// two poses that differ by it render the same photo: a ring's other end,
 /// any turn of a ball of one metal, not a cap's other end nor a labelled
-/// can's half turn. Facet centres are turned and each must land near
-/// another facet's centre of the same material.
-pub(in crate::estimate) fn maps_on_to_itself(asset: &ProbeAsset, turn: Quat, s: &SymmetrySettings) -> bool {
-    let mesh = &asset.mesh;
-    let (lo, hi) = mesh.bounds();
-    let centre = 0.5 * (lo + hi);
-    let motion = |p: Vec3| centre + turn * (p - centre);
-    let middle = Vec2::splat(1.0 / 3.0);
-    let facets: Vec<(Vec3, [f32; 5])> = (0..mesh.triangles.len())
-        .map(|t| {
-            let m = asset.material(mesh.interpolate(&mesh.uvs, t, middle));
-            let value = [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness, m.visibility];
-            (mesh.interpolate(&mesh.positions, t, middle), value)
-        })
-        .collect();
-    if facets.is_empty() {
-        return false;
+/// can's half turn. Built once per probe, asked of several turns.
+pub(in crate::estimate) struct SelfMap<'a> {
+    facets: Vec<(Vec3, [f32; 5])>,
+    /// The facets by cell of a grid `reach` a side.
+    grid: HashMap<[i64; 3], Vec<usize>>,
+    /// How far a turned centre may land from another's (metres).
+    reach: f64,
+    centre: Vec3,
+    settings: &'a SymmetrySettings,
+}
+
+impl<'a> SelfMap<'a> {
+    /// The facets of `asset`, and their grid.
+    pub(in crate::estimate) fn new(asset: &ProbeAsset, settings: &'a SymmetrySettings) -> Self {
+        let mesh = &asset.mesh;
+        let (lo, hi) = mesh.bounds();
+        let middle = Vec2::splat(1.0 / 3.0);
+        let facets: Vec<(Vec3, [f32; 5])> = (0..mesh.triangles.len())
+            .map(|t| {
+                let m = asset.material(mesh.interpolate(&mesh.uvs, t, middle));
+                let value = [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness, m.visibility];
+                (mesh.interpolate(&mesh.positions, t, middle), value)
+            })
+            .collect();
+        let area: f64 = (0..mesh.triangles.len())
+            .map(|t| 0.5 * mesh.face_normal(t).length() as f64)
+            .sum();
+        let spacing = (area / facets.len().max(1) as f64).sqrt();
+        let reach = (settings.self_map_reach * (hi - lo).length() as f64).max(2.0 * spacing);
+        let mut map = SelfMap {
+            facets,
+            grid: HashMap::new(),
+            reach,
+            centre: 0.5 * (lo + hi),
+            settings,
+        };
+        for (i, (p, _)) in map.facets.iter().enumerate() {
+            map.grid.entry(map.cell(*p)).or_default().push(i);
+        }
+        map
     }
-    let extent = (hi - lo).length() as f64;
-    let area: f64 = (0..mesh.triangles.len())
-        .map(|t| 0.5 * mesh.face_normal(t).length() as f64)
-        .sum();
-    let spacing = (area / facets.len() as f64).sqrt();
-    let reach = (SELF_MAP_REACH * extent).max(2.0 * spacing);
-    let cell = |p: Vec3| (p.as_dvec3() / reach).floor().as_i64vec3().to_array();
-    let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
-    for (i, (p, _)) in facets.iter().enumerate() {
-        grid.entry(cell(*p)).or_default().push(i);
+
+    fn cell(&self, p: Vec3) -> [i64; 3] {
+        (p.as_dvec3() / self.reach).floor().as_i64vec3().to_array()
     }
-    let lands = |(p, value): &(Vec3, [f32; 5])| {
-        let q = motion(*p);
-        let [x, y, z] = cell(q);
-        (-1..=1)
-            .flat_map(|a| (-1..=1).flat_map(move |b| (-1..=1).map(move |c| [x + a, y + b, z + c])))
-            .any(|k| {
-                grid.get(&k).is_some_and(|near| {
-                    near.iter().any(|&j| {
-                        let (r, other) = &facets[j];
-                        (r.distance(q) as f64) <= reach
-                            && value
-                                .iter()
-                                .zip(other)
-                                .all(|(u, v)| (u - v).abs() <= s.material_tolerance)
+
+    /// Whether `turn` maps the probe on to itself: of the facet centres
+    /// turned, `SymmetrySettings::self_map_share` land near another
+    /// facet's centre of the same material.
+    pub(in crate::estimate) fn alike(&self, turn: Quat) -> bool {
+        if self.facets.is_empty() {
+            return false;
+        }
+        let lands = |(p, value): &(Vec3, [f32; 5])| {
+            let q = self.centre + turn * (*p - self.centre);
+            let [x, y, z] = self.cell(q);
+            (-1..=1)
+                .flat_map(|a| (-1..=1).flat_map(move |b| (-1..=1).map(move |c| [x + a, y + b, z + c])))
+                .any(|k| {
+                    self.grid.get(&k).is_some_and(|near| {
+                        near.iter().any(|&j| {
+                            let (r, other) = &self.facets[j];
+                            (r.distance(q) as f64) <= self.reach
+                                && (value.iter().zip(other))
+                                    .all(|(u, v)| (u - v).abs() <= self.settings.material_tolerance)
+                        })
                     })
                 })
-            })
-    };
-    let every = facets.len().div_ceil(SELF_MAP_FACETS).max(1);
-    let tried: Vec<bool> = facets.iter().step_by(every).map(lands).collect();
-    tried.iter().filter(|&&l| l).count() as f64 >= SELF_MAP_SHARE * tried.len() as f64
+        };
+        let every = self.facets.len().div_ceil(SELF_MAP_FACETS).max(1);
+        let tried: Vec<bool> = self.facets.iter().step_by(every).map(lands).collect();
+        tried.iter().filter(|&&l| l).count() as f64 >= self.settings.self_map_share * tried.len() as f64
+    }
 }
 
 /// The line about which at least `SymmetrySettings::revolved_share` of the surface is of
@@ -463,17 +478,20 @@ mod tests {
     fn a_ball_of_one_metal_maps_on_to_itself_at_any_turn_a_can_and_a_cap_not_end_for_end() {
         let end_for_end = Quat::from_rotation_x(std::f32::consts::PI);
         let half_turn = Quat::from_rotation_y(std::f32::consts::PI);
+        let settings = s();
         let ball = render::procedural::UvSphere::default().build();
+        let ball = SelfMap::new(&ball, &settings);
         let odd = Quat::from_rotation_x(0.65) * Quat::from_rotation_y(1.9);
-        assert!(maps_on_to_itself(&ball, odd, &s()));
-        assert!(maps_on_to_itself(&ball, end_for_end, &s()));
+        assert!(ball.alike(odd));
+        assert!(ball.alike(end_for_end));
         let can = SodaCan::default().build();
-        assert!(maps_on_to_itself(&can, Quat::IDENTITY, &s()));
+        let can = SelfMap::new(&can, &settings);
+        assert!(can.alike(Quat::IDENTITY));
         // Its wave runs twice round, its logo once: the logo tells the half turn.
-        assert!(!maps_on_to_itself(&can, half_turn, &s()));
-        assert!(!maps_on_to_itself(&can, end_for_end, &s()));
+        assert!(!can.alike(half_turn));
+        assert!(!can.alike(end_for_end));
         let cap = render::procedural::ThermosCap::default().build();
-        assert!(!maps_on_to_itself(&cap, end_for_end, &s()));
+        assert!(!SelfMap::new(&cap, &settings).alike(end_for_end));
     }
 
     #[test]

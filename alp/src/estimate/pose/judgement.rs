@@ -23,7 +23,7 @@ use crate::estimate::lighting::{
 use crate::estimate::photo::{Photo, Pixels};
 use crate::estimate::report::{LineSearchReport, PhaseLog, PhaseReport, PoseRecord, RefinementStep, RivalReport};
 use crate::estimate::settings::Settings;
-use crate::estimate::symmetry::maps_on_to_itself;
+use crate::estimate::symmetry::SelfMap;
 
 /// The lean (degrees) that maximises `score` within `reach` either way,
 /// by a line search: leans of 0 and of `step` either way; while one side
@@ -340,10 +340,8 @@ impl PhotoJudge<'_> {
         let db = |scored: &ScoredRival| scored.as_ref().map_or(f64::NEG_INFINITY, |((db, _), _)| *db);
         // A rival that differs from the chosen pose by a turn mapping the
         // probe on to itself renders the same photo: no choice to judge.
-        let alike = |rival: &Pose| {
-            let turn = kept.pose.rotation.inverse() * rival.rotation;
-            maps_on_to_itself(self.probe.asset, turn, &self.settings.symmetry)
-        };
+        let self_map = SelfMap::new(self.probe.asset, &self.settings.symmetry);
+        let alike = |rival: &Pose| self_map.alike(kept.pose.rotation.inverse() * rival.rotation);
         let mut strongest = None;
         let mut distinct_db: Option<f64> = None;
         for rival_piloted in rivals {

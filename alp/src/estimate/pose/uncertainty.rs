@@ -39,7 +39,7 @@ use crate::error::Result;
 use crate::estimate::outline::{outline_points, signed_distance, signed_distance_at};
 use crate::estimate::photo::Photo;
 use crate::estimate::settings::{PoseSearchSettings, SymmetrySettings};
-use crate::estimate::symmetry::maps_on_to_itself;
+use crate::estimate::symmetry::SelfMap;
 use crate::linalg::{cholesky, cholesky_solve, symmetric_eigen};
 use crate::pose_frame::{PART_NAMES, PoseFrame, PoseParts};
 
@@ -149,15 +149,12 @@ pub(in crate::estimate) fn pose_uncertainty(
     let (mut information, rms, correlation) = outline.information();
     // A turn that maps the probe on to itself (any turn of a ball of one
     // metal, a smooth cap's about its axis) is no part of its pose.
+    let self_map = SelfMap::new(input.asset, input.symmetry);
     let alike = |k: usize| {
         let mut parts = [0.0; 6];
         parts[k] = ALIKE_TRIAL_DEG;
         let moved = frame.moved(input.pose, &PoseParts::from_array(parts));
-        maps_on_to_itself(
-            input.asset,
-            input.pose.rotation.inverse() * moved.rotation,
-            input.symmetry,
-        )
+        self_map.alike(input.pose.rotation.inverse() * moved.rotation)
     };
     for k in (3..6).filter(|&k| (k == 5 && input.alike_turned) || alike(k)) {
         (0..6).for_each(|j| (information[k][j], information[j][k]) = (0.0, 0.0));
