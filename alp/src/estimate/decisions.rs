@@ -47,13 +47,9 @@ pub(super) struct Choices<'a> {
     pub(super) pose_uncertainty: Option<&'a PoseUncertainty>,
 }
 
-/// A part of the pose whose one deviation moves the probe this far in the
-/// image (working pixels) is worth a warning: the map may be soft there.
-const WARN_SIGMA_PX: f64 = 1.0;
-
 /// The choices' decisions, and a warning for each the photo did not settle
 /// (and for a part of the pose it tells to no better than
-/// [`WARN_SIGMA_PX`]).
+/// `PoseSearchSettings::warn_sigma_px`).
 pub(super) fn decisions(choices: &Choices, settings: &Settings) -> (Vec<Decision>, Vec<String>) {
     let mut decisions = Vec::new();
     // The choice is against the rivals the probe's own symmetry does not
@@ -125,7 +121,7 @@ pub(super) fn decisions(choices: &Choices, settings: &Settings) -> (Vec<Decision
             _ => "the map is solved over the poses it cannot tell apart",
         };
         for (part, px) in &uncertainty.sigma_px {
-            if *px >= WARN_SIGMA_PX {
+            if *px >= settings.pose_search.warn_sigma_px {
                 warnings.push(format!(
                     "pose: the photo tells its {part} only to {:.2} (one deviation moves the probe {px:.1} px): \
                      {carried}",
